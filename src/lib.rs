@@ -1,0 +1,9 @@
+//! relocd: relocalises a Nao robot on the SPL field from one camera image.
+//!
+//! The library is the pure core (geometry, symmetries, renderer, recording format); the binary
+//! `relocd` is the command line on top of it.
+
+pub mod frame;
+pub mod geometry;
+pub mod recording;
+pub mod sim;

@@ -1,0 +1,211 @@
+//! The `relocd` command line: parses arguments and calls one library function per subcommand.
+//! Logs go to stderr; stdout carries only each command's result.
+
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use anyhow::{Context, bail};
+use clap::{Parser, Subcommand, ValueEnum};
+use indicatif::{ProgressBar, ProgressStyle};
+use tracing::info;
+
+use relocd::geometry::{CameraIntrinsics, FieldDimensions, FieldModel};
+use relocd::recording::FrameFormat;
+use relocd::sim::{DatasetSpec, Randomisation, render_dataset};
+
+/// Relocalise a Nao on the SPL field from one camera image.
+#[derive(Debug, Parser)]
+#[command(name = "relocd", version, about, long_about = None)]
+struct Cli {
+    /// Log level or filter for messages on stderr (error, warn, info, debug, trace).
+    #[arg(long, global = true, default_value = "info", env = "RELOCD_LOG")]
+    log_level: String,
+
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Render a recording of randomised, labelled frames as the Nao top camera sees them.
+    Render(RenderArgs),
+    /// Print the field description relocd uses (TOML, metres); edit a copy for another field.
+    Field(FieldArgs),
+}
+
+#[derive(Debug, clap::Args)]
+struct RenderArgs {
+    /// Directory to write the recording to (created; must not already hold one).
+    #[arg(long, default_value = "relocd-render")]
+    out: PathBuf,
+    /// Number of frames.
+    #[arg(long, default_value_t = 16)]
+    count: u64,
+    /// Seed: the same seed renders the same frames.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Image width in pixels (the field of view stays the Nao's).
+    #[arg(long, default_value_t = 640)]
+    width: u32,
+    /// Image height in pixels.
+    #[arg(long, default_value_t = 480)]
+    height: u32,
+    /// What lies beyond the carpet.
+    #[arg(long, value_enum, default_value_t = SurroundingsArg::Black)]
+    surroundings: SurroundingsArg,
+    /// Frame file format.
+    #[arg(long, value_enum, default_value_t = FormatArg::Png)]
+    format: FormatArg,
+    /// Rays per pixel along each axis, for anti-aliasing (1 to 8).
+    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..=8))]
+    supersample: u32,
+    /// Most other robots on the carpet per frame.
+    #[arg(long, default_value_t = 6)]
+    max_robots: usize,
+    /// Probability that the ball is on the carpet.
+    #[arg(long, default_value_t = 0.7)]
+    ball_probability: f64,
+    /// Probability that the goals have nets.
+    #[arg(long, default_value_t = 0.5)]
+    net_probability: f64,
+    /// Largest head yaw in degrees (uniform in ±this); 0 looks along the robot's heading.
+    #[arg(long, default_value_t = 0.0)]
+    max_head_yaw: f64,
+    /// Field description file (TOML or JSON, see `relocd field`); default: SPL 2025.
+    #[arg(long)]
+    field: Option<PathBuf>,
+}
+
+#[derive(Debug, clap::Args)]
+struct FieldArgs {
+    /// Print this field file's description (validated) instead of the default.
+    #[arg(long)]
+    field: Option<PathBuf>,
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum SurroundingsArg {
+    /// Black beyond the carpet, as in the thesis: the field's symmetry holds.
+    Black,
+    /// A hall with random coloured wall panels: breaks the symmetry.
+    Asymmetric,
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum FormatArg {
+    /// PNG (RGB).
+    Png,
+    /// JPEG (RGB).
+    Jpeg,
+    /// Raw packed YUYV 4:2:2, as the camera streams.
+    Yuyv,
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    if let Err(error) = init_logging(&cli.log_level) {
+        eprintln!("error: {error:#}");
+        return ExitCode::from(2);
+    }
+    let result = match cli.command {
+        Command::Render(args) => render(args),
+        Command::Field(args) => field(args),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(error) => {
+            eprintln!("error: {error:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn init_logging(filter: &str) -> anyhow::Result<()> {
+    let filter = tracing_subscriber::EnvFilter::try_new(filter)
+        .with_context(|| format!("bad --log-level {filter:?}: expected e.g. info, debug or relocd=trace"))?;
+    tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_ansi(std::io::stderr().is_terminal())
+        .init();
+    Ok(())
+}
+
+fn load_field(path: Option<&Path>) -> anyhow::Result<FieldModel> {
+    let dimensions = match path {
+        Some(path) => FieldDimensions::load(path)?,
+        None => FieldDimensions::spl_2025(),
+    };
+    Ok(FieldModel::new(dimensions))
+}
+
+fn render(args: RenderArgs) -> anyhow::Result<()> {
+    if args.width < 2 || args.height < 1 || args.width % 2 != 0 {
+        bail!(
+            "--width {} --height {}: the width must be even (YUYV pairs pixels) and both positive",
+            args.width,
+            args.height
+        );
+    }
+    for (name, value) in
+        [("--ball-probability", args.ball_probability), ("--net-probability", args.net_probability)]
+    {
+        if !(0.0..=1.0).contains(&value) {
+            bail!("{name} {value}: expected a probability in [0, 1]");
+        }
+    }
+    if !(0.0..180.0).contains(&args.max_head_yaw) {
+        bail!("--max-head-yaw {}: expected degrees in [0, 180)", args.max_head_yaw);
+    }
+    let spec = DatasetSpec {
+        field: load_field(args.field.as_deref())?,
+        intrinsics: CameraIntrinsics::nao_top().with_resolution(args.width, args.height),
+        randomisation: Randomisation {
+            max_robots: args.max_robots,
+            ball_probability: args.ball_probability,
+            net_probability: args.net_probability,
+            max_head_yaw: args.max_head_yaw.to_radians(),
+            asymmetric_surroundings: matches!(args.surroundings, SurroundingsArg::Asymmetric),
+            ..Randomisation::default()
+        },
+        supersample: args.supersample,
+        format: match args.format {
+            FormatArg::Png => FrameFormat::Png,
+            FormatArg::Jpeg => FrameFormat::Jpeg,
+            FormatArg::Yuyv => FrameFormat::Yuyv,
+        },
+        count: args.count,
+        seed: args.seed,
+        frames_per_second: 30.0,
+    };
+    info!(out = %args.out.display(), count = args.count, seed = args.seed, width = args.width, height = args.height, "rendering");
+    let progress = ProgressBar::new(args.count).with_style(
+        ProgressStyle::with_template("{elapsed_precise} [{bar:40}] {pos}/{len} frames, {per_sec}, eta {eta}")
+            .expect("valid progress template")
+            .progress_chars("=> "),
+    );
+    let started = std::time::Instant::now();
+    render_dataset(&spec, &args.out, || progress.inc(1))
+        .with_context(|| format!("rendering into {}", args.out.display()))?;
+    progress.finish_and_clear();
+    let seconds = started.elapsed().as_secs_f64();
+    info!(seconds, frames_per_second = args.count as f64 / seconds.max(1e-9), "done");
+    println!(
+        "{}",
+        serde_json::json!({
+            "recording": args.out,
+            "frames": args.count,
+            "width": args.width,
+            "height": args.height,
+            "seed": args.seed,
+        })
+    );
+    Ok(())
+}
+
+fn field(args: FieldArgs) -> anyhow::Result<()> {
+    let model = load_field(args.field.as_deref())?;
+    print!("{}", model.dimensions().to_toml());
+    Ok(())
+}

@@ -1,0 +1,227 @@
+//! Randomised frames for training and testing: a pose uniformly over the carpet, a jittered camera,
+//! and a randomised scene (light, carpet tone, robots, ball, sensor noise). Deterministic: the same
+//! seed and frame index always give the same frame, whatever the thread count.
+
+use std::f64::consts::PI;
+use std::ops::RangeInclusive;
+
+use nalgebra::{Point2, Vector3};
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use super::colour::{colour_temperature, hsv_to_linear};
+use super::render::RenderSettings;
+use super::scene::{Lighting, Robot, Scene, Surroundings};
+use super::trace::mix_bits;
+use crate::geometry::{CameraPose, FieldModel, FieldPose};
+
+/// SPL jersey colours, as (hue°, saturation, value) in sRGB.
+const JERSEY_COLOURS: [(f64, f64, f64); 10] = [
+    (220.0, 0.8, 0.7), // blue
+    (0.0, 0.85, 0.75), // red
+    (55.0, 0.9, 0.9),  // yellow
+    (0.0, 0.0, 0.12),  // black
+    (0.0, 0.0, 0.95),  // white
+    (120.0, 0.8, 0.5), // green
+    (28.0, 0.9, 0.9),  // orange
+    (285.0, 0.6, 0.6), // purple
+    (25.0, 0.6, 0.35), // brown
+    (0.0, 0.0, 0.5),   // grey
+];
+
+/// The ranges frames are drawn from. Angles in radians, lengths in metres.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Randomisation {
+    /// Camera height above the ground.
+    pub camera_height: RangeInclusive<f64>,
+    /// Camera pitch (positive looks down).
+    pub camera_pitch: RangeInclusive<f64>,
+    /// Camera roll.
+    pub camera_roll: RangeInclusive<f64>,
+    /// Largest |head yaw|; 0 keeps the camera looking along the robot's heading.
+    pub max_head_yaw: f64,
+    /// Light intensity factor.
+    pub light_intensity: RangeInclusive<f64>,
+    /// Colour temperature of the light, kelvin.
+    pub colour_temperature: RangeInclusive<f64>,
+    /// How much of the light's colour cast the camera's white balance leaves (0 = perfect balance).
+    pub white_balance_error: RangeInclusive<f64>,
+    /// Fraction of diffuse light.
+    pub ambient: RangeInclusive<f64>,
+    /// Largest tilt of the main light from vertical.
+    pub max_light_tilt: f64,
+    /// Hue of the carpet, degrees.
+    pub carpet_hue: RangeInclusive<f64>,
+    /// Saturation of the carpet.
+    pub carpet_saturation: RangeInclusive<f64>,
+    /// Brightness (HSV value) of the carpet.
+    pub carpet_value: RangeInclusive<f64>,
+    /// Most other robots on the carpet (uniform from 0).
+    pub max_robots: usize,
+    /// Probability that the ball is on the carpet.
+    pub ball_probability: f64,
+    /// Probability that the goals have nets.
+    pub net_probability: f64,
+    /// Sensor noise standard deviation, 8-bit levels.
+    pub noise_sigma: RangeInclusive<f64>,
+    /// Black or asymmetric surroundings (the asymmetric hall gets a per-frame seed).
+    pub asymmetric_surroundings: bool,
+}
+
+impl Default for Randomisation {
+    fn default() -> Self {
+        Self {
+            camera_height: 0.45..=0.53,
+            camera_pitch: 0.0..=20f64.to_radians(),
+            camera_roll: -3f64.to_radians()..=3f64.to_radians(),
+            max_head_yaw: 0.0,
+            light_intensity: 0.55..=1.3,
+            colour_temperature: 3000.0..=8000.0,
+            white_balance_error: 0.0..=0.5,
+            ambient: 0.45..=0.85,
+            max_light_tilt: 35f64.to_radians(),
+            carpet_hue: 85.0..=150.0,
+            carpet_saturation: 0.35..=0.85,
+            carpet_value: 0.25..=0.6,
+            max_robots: 6,
+            ball_probability: 0.7,
+            net_probability: 0.5,
+            noise_sigma: 0.5..=5.0,
+            asymmetric_surroundings: false,
+        }
+    }
+}
+
+/// One randomised frame, ready to render.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SampledFrame {
+    /// The robot's true pose.
+    pub pose: FieldPose,
+    /// Its camera.
+    pub camera: CameraPose,
+    /// The scene around it.
+    pub scene: Scene,
+    /// Sensor settings (noise, chroma subsampling) for this frame.
+    pub settings: RenderSettings,
+}
+
+impl Randomisation {
+    /// Draws frame `index` of the sequence `seed`.
+    pub fn sample(&self, field: &FieldModel, seed: u64, index: u64, supersample: u32) -> SampledFrame {
+        let mut rng = ChaCha8Rng::seed_from_u64(mix_bits(seed) ^ mix_bits(index.wrapping_add(0x5eed)));
+        let dimensions = field.dimensions();
+        let (half_length, half_width) = (dimensions.carpet_half_length(), dimensions.carpet_half_width());
+        let pose = FieldPose::new(
+            rng.random_range(-half_length..=half_length),
+            rng.random_range(-half_width..=half_width),
+            rng.random_range(-PI..PI),
+        )
+        .expect("sampled pose is finite");
+        let head_yaw = if self.max_head_yaw > 0.0 {
+            rng.random_range(-self.max_head_yaw..=self.max_head_yaw)
+        } else {
+            0.0
+        };
+        let camera = CameraPose::new(
+            rng.random_range(self.camera_height.clone()),
+            rng.random_range(self.camera_pitch.clone()),
+            rng.random_range(self.camera_roll.clone()),
+            head_yaw,
+        )
+        .expect("randomisation ranges give a valid camera pose");
+
+        let intensity = rng.random_range(self.light_intensity.clone());
+        let cast = colour_temperature(rng.random_range(self.colour_temperature.clone()));
+        let balance_error = rng.random_range(self.white_balance_error.clone());
+        let tint = cast.map(|channel| 1.0 + balance_error * (channel - 1.0));
+        let tilt = rng.random_range(0.0..=self.max_light_tilt);
+        let azimuth = rng.random_range(-PI..PI);
+        let lighting = Lighting {
+            colour: tint.map(|channel| channel * intensity),
+            direction: Vector3::new(tilt.sin() * azimuth.cos(), tilt.sin() * azimuth.sin(), tilt.cos()),
+            ambient: rng.random_range(self.ambient.clone()),
+        };
+        let carpet = hsv_to_linear(
+            rng.random_range(self.carpet_hue.clone()),
+            rng.random_range(self.carpet_saturation.clone()),
+            rng.random_range(self.carpet_value.clone()),
+        );
+        let paint_level = rng.random_range(0.7..=0.95);
+        let white_level = rng.random_range(0.6..=0.9);
+
+        let robot_count = rng.random_range(0..=self.max_robots);
+        let mut robots = Vec::with_capacity(robot_count);
+        while robots.len() < robot_count {
+            let position = Point2::new(
+                rng.random_range(-half_length..=half_length),
+                rng.random_range(-half_width..=half_width),
+            );
+            // Keep other robots out of our own body.
+            if (position - pose.position()).norm() > 0.35 {
+                let (hue, saturation, value) = JERSEY_COLOURS[rng.random_range(0..JERSEY_COLOURS.len())];
+                robots.push(Robot { position, jersey: hsv_to_linear(hue, saturation, value) });
+            }
+        }
+        let ball = rng.random_bool(self.ball_probability).then(|| {
+            Point2::new(
+                rng.random_range(-half_length..=half_length),
+                rng.random_range(-half_width..=half_width),
+            )
+        });
+        let surroundings = if self.asymmetric_surroundings {
+            Surroundings::Asymmetric { seed: rng.random() }
+        } else {
+            Surroundings::Black
+        };
+        let scene = Scene {
+            field: field.clone(),
+            carpet,
+            paint: [paint_level; 3],
+            white: [white_level; 3],
+            nets: rng.random_bool(self.net_probability),
+            lighting,
+            robots,
+            ball,
+            surroundings,
+        };
+        let settings = RenderSettings {
+            supersample,
+            noise_sigma: rng.random_range(self.noise_sigma.clone()),
+            noise_seed: rng.random(),
+            chroma_subsampling: true,
+        };
+        SampledFrame { pose, camera, scene, settings }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sampling_is_deterministic_and_varies_by_index() {
+        let field = FieldModel::default();
+        let randomisation = Randomisation::default();
+        let first = randomisation.sample(&field, 1, 0, 2);
+        assert_eq!(first, randomisation.sample(&field, 1, 0, 2));
+        assert_ne!(first.pose, randomisation.sample(&field, 1, 1, 2).pose);
+        assert_ne!(first.pose, randomisation.sample(&field, 2, 0, 2).pose);
+    }
+
+    #[test]
+    fn samples_stay_within_their_ranges() {
+        let field = FieldModel::default();
+        let randomisation = Randomisation::default();
+        for index in 0..200 {
+            let frame = randomisation.sample(&field, 9, index, 1);
+            assert!(field.is_on_carpet(frame.pose.position()));
+            assert!(randomisation.camera_height.contains(&frame.camera.height()));
+            assert!(randomisation.camera_pitch.contains(&frame.camera.pitch()));
+            assert!(frame.scene.robots.len() <= randomisation.max_robots);
+            for robot in &frame.scene.robots {
+                assert!(field.is_on_carpet(robot.position));
+                assert!((robot.position - frame.pose.position()).norm() > 0.35);
+            }
+        }
+    }
+}
