@@ -1,0 +1,105 @@
+//! The `relocd` binary end to end: what a person types, what they get back.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+use relocd::recording::Recording;
+
+fn relocd(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_relocd")).args(args).output().expect("relocd runs")
+}
+
+fn stdout(output: &Output) -> String {
+    String::from_utf8_lossy(&output.stdout).into_owned()
+}
+
+fn stderr(output: &Output) -> String {
+    String::from_utf8_lossy(&output.stderr).into_owned()
+}
+
+fn render_small(out: &Path, extra: &[&str]) -> Output {
+    let out = out.to_str().unwrap();
+    let mut args =
+        vec!["render", "--out", out, "--count", "5", "--seed", "3", "--width", "64", "--height", "48"];
+    args.extend_from_slice(extra);
+    relocd(&args)
+}
+
+#[test]
+fn render_writes_a_recording_and_reports_it_on_stdout() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("rec");
+    let output = render_small(&out, &["--surroundings", "asymmetric"]);
+    assert!(output.status.success(), "{}", stderr(&output));
+    let summary: serde_json::Value = serde_json::from_str(stdout(&output).trim()).expect("one JSON line");
+    assert_eq!(summary["frames"], 5);
+    assert_eq!(summary["width"], 64);
+
+    let recording = Recording::open(&out).unwrap();
+    assert_eq!(recording.records().len(), 5);
+    for record in recording.records() {
+        assert!(record.pose.is_some());
+        assert_eq!(recording.load_frame(record).unwrap().dimensions(), (64, 48));
+    }
+}
+
+#[test]
+fn render_is_reproducible_from_the_seed() {
+    let dir = tempfile::tempdir().unwrap();
+    let (a, b) = (dir.path().join("a"), dir.path().join("b"));
+    assert!(render_small(&a, &["--format", "yuyv"]).status.success());
+    assert!(render_small(&b, &["--format", "yuyv"]).status.success());
+    for name in ["frames.jsonl", "000000.yuyv", "000004.yuyv"] {
+        assert_eq!(std::fs::read(a.join(name)).unwrap(), std::fs::read(b.join(name)).unwrap(), "{name}");
+    }
+}
+
+#[test]
+fn render_refuses_to_overwrite_and_says_why() {
+    let dir = tempfile::tempdir().unwrap();
+    assert!(render_small(dir.path(), &[]).status.success());
+    let again = render_small(dir.path(), &[]);
+    assert!(!again.status.success());
+    assert!(stderr(&again).contains("already holds a recording"), "{}", stderr(&again));
+    assert!(stdout(&again).is_empty(), "no result on stdout after an error");
+}
+
+#[test]
+fn bad_render_arguments_are_rejected_with_a_reason() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("x");
+    let odd = relocd(&["render", "--out", out.to_str().unwrap(), "--width", "63"]);
+    assert!(!odd.status.success());
+    assert!(stderr(&odd).contains("the width must be even"), "{}", stderr(&odd));
+    let cases: [(&[&str], &str); 3] = [
+        (&["--ball-probability", "1.5"], "--ball-probability 1.5"),
+        (&["--supersample", "0"], "--supersample"),
+        (&["--field", "/nonexistent/field.toml"], "cannot read field file"),
+    ];
+    for (extra, expected) in cases {
+        let output = render_small(&out, extra);
+        assert!(!output.status.success(), "{extra:?} should fail");
+        assert!(stderr(&output).contains(expected), "{extra:?}: {}", stderr(&output));
+    }
+}
+
+#[test]
+fn field_prints_a_description_that_loads_back() {
+    let output = relocd(&["field"]);
+    assert!(output.status.success());
+    let text = stdout(&output);
+    assert!(text.contains("field_length = 9.0"), "{text}");
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("field.toml");
+    std::fs::write(&path, text.replace("field_length = 9.0", "field_length = 7.5")).unwrap();
+    let output = relocd(&["field", "--field", path.to_str().unwrap()]);
+    assert!(output.status.success(), "{}", stderr(&output));
+    assert!(stdout(&output).contains("field_length = 7.5"));
+}
+
+#[test]
+fn bad_log_level_is_a_clear_error() {
+    let output = relocd(&["--log-level", "loud=[", "field"]);
+    assert!(!output.status.success());
+    assert!(stderr(&output).contains("bad --log-level"), "{}", stderr(&output));
+}
