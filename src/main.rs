@@ -2,6 +2,7 @@
 //! Logs go to stderr; stdout carries only each command's result.
 
 use std::io::IsTerminal;
+use std::ops::RangeInclusive;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
@@ -72,6 +73,21 @@ struct RenderArgs {
     /// Largest head yaw in degrees (uniform in ±this); 0 looks along the robot's heading.
     #[arg(long, default_value_t = 0.0)]
     max_head_yaw: f64,
+    /// Camera height range in metres, MIN,MAX.
+    #[arg(long, default_value = "0.45,0.53", value_parser = parse_range)]
+    camera_height: RangeInclusive<f64>,
+    /// Camera pitch range in degrees (positive looks down), MIN,MAX.
+    #[arg(long, default_value = "0,20", value_parser = parse_range)]
+    camera_pitch: RangeInclusive<f64>,
+    /// Largest camera roll in degrees (uniform in ±this).
+    #[arg(long, default_value_t = 3.0)]
+    max_camera_roll: f64,
+    /// Horizontal field of view in degrees.
+    #[arg(long, default_value_t = 54.7)]
+    horizontal_fov: f64,
+    /// Vertical field of view in degrees.
+    #[arg(long, default_value_t = 42.5)]
+    vertical_fov: f64,
     /// Field description file (TOML or JSON, see `relocd field`); default: SPL 2025.
     #[arg(long)]
     field: Option<PathBuf>,
@@ -158,14 +174,36 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
     if !(0.0..180.0).contains(&args.max_head_yaw) {
         bail!("--max-head-yaw {}: expected degrees in [0, 180)", args.max_head_yaw);
     }
+    if !(0.0..90.0).contains(&args.max_camera_roll) {
+        bail!("--max-camera-roll {}: expected degrees in [0, 90)", args.max_camera_roll);
+    }
+    if *args.camera_height.start() <= 0.0 || *args.camera_height.end() > 5.0 {
+        bail!("--camera-height {:?}: expected metres in (0, 5]", args.camera_height);
+    }
+    if *args.camera_pitch.start() <= -90.0 || *args.camera_pitch.end() >= 90.0 {
+        bail!("--camera-pitch {:?}: expected degrees in (-90, 90)", args.camera_pitch);
+    }
+    for (name, value) in [("--horizontal-fov", args.horizontal_fov), ("--vertical-fov", args.vertical_fov)] {
+        if !(value > 1.0 && value < 170.0) {
+            bail!("{name} {value}: expected degrees in (1, 170)");
+        }
+    }
     let spec = DatasetSpec {
         field: load_field(args.field.as_deref())?,
-        intrinsics: CameraIntrinsics::nao_top().with_resolution(args.width, args.height),
+        intrinsics: CameraIntrinsics {
+            width: args.width,
+            height: args.height,
+            horizontal_fov: args.horizontal_fov.to_radians(),
+            vertical_fov: args.vertical_fov.to_radians(),
+        },
         randomisation: Randomisation {
             max_robots: args.max_robots,
             ball_probability: args.ball_probability,
             net_probability: args.net_probability,
             max_head_yaw: args.max_head_yaw.to_radians(),
+            camera_height: args.camera_height.clone(),
+            camera_pitch: args.camera_pitch.start().to_radians()..=args.camera_pitch.end().to_radians(),
+            camera_roll: -args.max_camera_roll.to_radians()..=args.max_camera_roll.to_radians(),
             asymmetric_surroundings: matches!(args.surroundings, SurroundingsArg::Asymmetric),
             ..Randomisation::default()
         },
@@ -202,6 +240,23 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
         })
     );
     Ok(())
+}
+
+/// Parses `MIN,MAX` into an inclusive range of finite numbers with MIN <= MAX.
+fn parse_range(text: &str) -> Result<RangeInclusive<f64>, String> {
+    let (low, high) = text.split_once(',').ok_or_else(|| format!("expected MIN,MAX, found {text:?}"))?;
+    let number = |part: &str| {
+        part.trim()
+            .parse::<f64>()
+            .ok()
+            .filter(|value| value.is_finite())
+            .ok_or_else(|| format!("{part:?} is not a number"))
+    };
+    let (low, high) = (number(low)?, number(high)?);
+    if low > high {
+        return Err(format!("MIN {low} is greater than MAX {high}"));
+    }
+    Ok(low..=high)
 }
 
 fn field(args: FieldArgs) -> anyhow::Result<()> {

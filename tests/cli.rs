@@ -71,7 +71,10 @@ fn bad_render_arguments_are_rejected_with_a_reason() {
     let odd = relocd(&["render", "--out", out.to_str().unwrap(), "--width", "63"]);
     assert!(!odd.status.success());
     assert!(stderr(&odd).contains("the width must be even"), "{}", stderr(&odd));
-    let cases: [(&[&str], &str); 3] = [
+    let cases: [(&[&str], &str); 6] = [
+        (&["--camera-pitch", "20,10"], "MIN 20 is greater than MAX 10"),
+        (&["--camera-height", "0.5"], "expected MIN,MAX"),
+        (&["--horizontal-fov", "0"], "--horizontal-fov 0"),
         (&["--ball-probability", "1.5"], "--ball-probability 1.5"),
         (&["--supersample", "0"], "--supersample"),
         (&["--field", "/nonexistent/field.toml"], "cannot read field file"),

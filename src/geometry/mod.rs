@@ -15,6 +15,6 @@ pub mod symmetry;
 
 pub use angle::normalize_angle;
 pub use camera::{Camera, CameraIntrinsics};
-pub use field::{FieldDimensions, FieldModel};
-pub use pose::{CameraPose, FieldPose};
-pub use symmetry::{FoldClass, FoldedPose, Hypothesis, Representation, Symmetry};
+pub use field::{FieldDimensions, FieldError, FieldModel};
+pub use pose::{CameraPose, FieldPose, PoseError};
+pub use symmetry::{FoldClass, FoldedPose, Hypothesis, Representation, Symmetry, SymmetryError};

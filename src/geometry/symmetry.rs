@@ -28,7 +28,7 @@ use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
 use super::angle::normalize_angle;
-use super::pose::FieldPose;
+use super::pose::{FieldPose, PoseError};
 
 /// Why a folded prediction could not be unfolded.
 #[derive(Debug, Error, PartialEq)]
@@ -231,12 +231,7 @@ pub struct Hypothesis {
 
 impl FoldedPose {
     /// A folded pose predicted for `representation`; the heading is wrapped into (−π, π].
-    pub fn new(
-        representation: Representation,
-        x: f64,
-        y: f64,
-        heading: f64,
-    ) -> Result<Self, super::pose::PoseError> {
+    pub fn new(representation: Representation, x: f64, y: f64, heading: f64) -> Result<Self, PoseError> {
         let pose = FieldPose::new(x, y, heading)?;
         Ok(Self { representation, x: pose.x(), y: pose.y(), heading: pose.heading() })
     }

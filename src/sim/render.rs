@@ -19,7 +19,8 @@ pub struct RenderSettings {
     pub noise_sigma: f64,
     /// Seed of the noise pattern.
     pub noise_seed: u64,
-    /// Share chroma between horizontal pixel pairs as the camera's YUYV 4:2:2 does.
+    /// Share chroma between horizontal pixel pairs as the camera's YUYV 4:2:2 does (needs an even
+    /// width; images of odd width are left as they are).
     pub chroma_subsampling: bool,
 }
 
