@@ -148,8 +148,13 @@ pub fn rgb_to_yuv(r: u8, g: u8, b: u8) -> (f32, f32, f32) {
 
 /// BT.601 full-range YUV → RGB, clamped to bytes.
 pub fn yuv_to_rgb(y: f32, u: f32, v: f32) -> [u8; 3] {
+    yuv_to_rgb_f32(y, u, v).map(clamp_u8)
+}
+
+/// BT.601 full-range YUV → RGB as floats clamped to [0, 255], not rounded.
+pub fn yuv_to_rgb_f32(y: f32, u: f32, v: f32) -> [f32; 3] {
     let (u, v) = (u - 128.0, v - 128.0);
-    [clamp_u8(y + 1.402 * v), clamp_u8(y - 0.344_136 * u - 0.714_136 * v), clamp_u8(y + 1.772 * u)]
+    [y + 1.402 * v, y - 0.344_136 * u - 0.714_136 * v, y + 1.772 * u].map(|channel| channel.clamp(0.0, 255.0))
 }
 
 fn clamp_u8(value: f32) -> u8 {

@@ -3,7 +3,10 @@
 //! The library is the pure core (geometry, symmetries, renderer, recording format); the binary
 //! `relocd` is the command line on top of it.
 
+pub mod eval;
 pub mod frame;
 pub mod geometry;
 pub mod recording;
+pub mod relocaliser;
+pub mod replay;
 pub mod sim;

@@ -12,7 +12,8 @@ use indicatif::{ProgressBar, ProgressStyle};
 use tracing::info;
 
 use relocd::geometry::{CameraIntrinsics, FieldDimensions, FieldModel};
-use relocd::recording::FrameFormat;
+use relocd::recording::{FrameFormat, Recording};
+use relocd::relocaliser::{self, Model, Relocaliser};
 use relocd::sim::{DatasetSpec, Randomisation, render_dataset};
 
 /// Relocalise a Nao on the SPL field from one camera image.
@@ -31,6 +32,9 @@ struct Cli {
 enum Command {
     /// Render a recording of randomised, labelled frames as the Nao top camera sees them.
     Render(RenderArgs),
+    /// Relocalise every frame of a recording: one JSON line per frame, and the thesis' metrics
+    /// (on stderr, and with --metrics-json as a file) where the recording has true poses.
+    Replay(ReplayArgs),
     /// Print the field description relocd uses (TOML, metres); edit a copy for another field.
     Field(FieldArgs),
 }
@@ -94,6 +98,18 @@ struct RenderArgs {
 }
 
 #[derive(Debug, clap::Args)]
+struct ReplayArgs {
+    /// Recording directory (frames.jsonl and frames); default: the sample recording in tests/data/sample.
+    recording: Option<PathBuf>,
+    /// ONNX model file; default: the built-in int8 SqueezeNet half-point model.
+    #[arg(long)]
+    model: Option<PathBuf>,
+    /// Write the metrics as JSON to this file.
+    #[arg(long)]
+    metrics_json: Option<PathBuf>,
+}
+
+#[derive(Debug, clap::Args)]
 struct FieldArgs {
     /// Print this field file's description (validated) instead of the default.
     #[arg(long)]
@@ -126,6 +142,7 @@ fn main() -> ExitCode {
     }
     let result = match cli.command {
         Command::Render(args) => render(args),
+        Command::Replay(args) => replay(args),
         Command::Field(args) => field(args),
     };
     match result {
@@ -239,6 +256,52 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
             "seed": args.seed,
         })
     );
+    Ok(())
+}
+
+/// The sample recording checked into the repository, used when `replay` gets no recording.
+const SAMPLE_RECORDING: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/sample");
+
+fn replay(args: ReplayArgs) -> anyhow::Result<()> {
+    let directory = args.recording.unwrap_or_else(|| PathBuf::from(SAMPLE_RECORDING));
+    let recording = Recording::open(&directory).with_context(|| {
+        format!(
+            "opening recording {} (pass a recording directory as the first argument)",
+            directory.display()
+        )
+    })?;
+    let model = match &args.model {
+        Some(path) => Model::load(path)?,
+        None => relocaliser::default_model()?,
+    };
+    let contract = model.contract();
+    info!(
+        model = %contract.model_id,
+        representation = %contract.representation,
+        recording = %directory.display(),
+        frames = recording.records().len(),
+        "replaying"
+    );
+    let relocaliser = Relocaliser::new(model);
+    let stdout = std::io::stdout();
+    let summary =
+        relocd::replay::replay(&recording, &relocaliser, &mut stdout.lock()).context("writing results")?;
+    if let Some(metrics) = &summary.metrics {
+        eprintln!("{}", metrics.table());
+        if let Some(path) = &args.metrics_json {
+            let json = serde_json::to_string_pretty(metrics).expect("metrics serialise");
+            std::fs::write(path, json + "\n").with_context(|| format!("writing {}", path.display()))?;
+        }
+    } else if args.metrics_json.is_some() {
+        bail!("--metrics-json: the recording has no true poses to measure against");
+    }
+    if summary.failed > 0 {
+        bail!(
+            "{} of {} frames could not be relocalised (see their lines and the log)",
+            summary.failed,
+            summary.frames
+        );
+    }
     Ok(())
 }
 

@@ -106,3 +106,79 @@ fn bad_log_level_is_a_clear_error() {
     assert!(!output.status.success());
     assert!(stderr(&output).contains("bad --log-level"), "{}", stderr(&output));
 }
+
+#[test]
+fn replay_with_no_arguments_runs_the_sample_through_the_default_model() {
+    let dir = tempfile::tempdir().unwrap();
+    let metrics_path = dir.path().join("metrics.json");
+    let output = relocd(&["replay", "--metrics-json", metrics_path.to_str().unwrap()]);
+    assert!(output.status.success(), "{}", stderr(&output));
+    let lines: Vec<serde_json::Value> = stdout(&output)
+        .lines()
+        .map(|line| serde_json::from_str(line).expect("a JSON line per frame"))
+        .collect();
+    assert_eq!(lines.len(), 24);
+    for line in &lines {
+        let weights: f64 =
+            line["hypotheses"].as_array().unwrap().iter().map(|h| h["weight"].as_f64().unwrap()).sum();
+        assert!((weights - 1.0).abs() < 1e-6, "{line}");
+        assert!(line["timings"]["inference_ms"].as_f64().unwrap() > 0.0);
+    }
+    assert!(stderr(&output).contains("best-of-set"), "the metrics table goes to stderr");
+    let metrics: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&metrics_path).unwrap()).unwrap();
+    assert_eq!(metrics["frames"], 24);
+    for form in ["oracle", "modelled", "best_of_set"] {
+        assert!(metrics[form]["location_median_m"].is_number(), "{form}");
+        assert!(metrics[form]["heading_median_deg"].is_number(), "{form}");
+    }
+    assert!(metrics["oracle"]["fold_error_mean"].is_number());
+    // A loose bound that proves the pipeline is wired right; accuracy is measured in models/README.md.
+    let median = metrics["best_of_set"]["location_median_m"].as_f64().unwrap();
+    assert!(median < 1.0, "best-of-set median {median} m on the sample recording");
+}
+
+#[test]
+fn replay_reports_a_bad_frame_and_goes_on() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = Path::new(env!("CARGO_MANIFEST_DIR")).join("models/fixtures/tiny/valid.onnx");
+    let fitting = dir.path().join("fitting");
+    let output = relocd(&[
+        "render",
+        "--out",
+        fitting.to_str().unwrap(),
+        "--count",
+        "4",
+        "--width",
+        "320",
+        "--height",
+        "240",
+        "--supersample",
+        "1",
+    ]);
+    assert!(output.status.success());
+    std::fs::write(fitting.join("000002.png"), b"not a png").unwrap();
+    let output = relocd(&["replay", fitting.to_str().unwrap(), "--model", model.to_str().unwrap()]);
+    assert!(!output.status.success());
+    assert!(stderr(&output).contains("1 of 4 frames could not be relocalised"), "{}", stderr(&output));
+    let lines: Vec<serde_json::Value> =
+        stdout(&output).lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    assert_eq!(lines.len(), 4);
+    assert!(lines[2]["error"].as_str().unwrap().contains("000002.png"));
+    assert!(lines[3]["hypotheses"].is_array(), "the frame after the bad one is relocalised");
+
+    let small = dir.path().join("small");
+    assert!(render_small(&small, &[]).status.success());
+    let wrong_size = relocd(&["replay", small.to_str().unwrap(), "--model", model.to_str().unwrap()]);
+    assert!(stderr(&wrong_size).contains("a 64x48 frame cannot be reduced"), "{}", stderr(&wrong_size));
+}
+
+#[test]
+fn replay_with_a_missing_model_or_recording_says_which() {
+    let output = relocd(&["replay", "--model", "/nonexistent/model.onnx"]);
+    assert!(!output.status.success());
+    assert!(stderr(&output).contains("cannot read model /nonexistent/model.onnx"), "{}", stderr(&output));
+    let output = relocd(&["replay", "/nonexistent/recording"]);
+    assert!(!output.status.success());
+    assert!(stderr(&output).contains("opening recording /nonexistent/recording"), "{}", stderr(&output));
+}

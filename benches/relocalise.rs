@@ -1,0 +1,45 @@
+//! Per-stage latency of one relocalisation on the calling thread: YUYV 640×480 → input tensor,
+//! inference of the built-in int8 model and of its fp32 twin, decoding and unfolding, and the whole
+//! pipeline.
+
+use std::path::Path;
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use relocd::frame::{Frame, YuyvImage};
+use relocd::geometry::{Camera, CameraIntrinsics, FieldModel};
+use relocd::relocaliser::{Model, Prediction, Relocaliser, default_model, preprocess};
+use relocd::sim::{Randomisation, render};
+
+fn camera_frame() -> Frame {
+    let field = FieldModel::default();
+    let sampled = Randomisation::default().sample(&field, 4000, 0, 1);
+    let camera = Camera::new(CameraIntrinsics::nao_top(), &sampled.pose, &sampled.camera);
+    Frame::Yuyv(YuyvImage::from_rgb(&render(&sampled.scene, &camera, &sampled.settings)).unwrap())
+}
+
+fn stages(criterion: &mut Criterion) {
+    let frame = camera_frame();
+    let model = default_model().unwrap();
+    let input = preprocess(&frame, &model.contract().input).unwrap();
+    let raw = model.run(&input).unwrap();
+    let representation = model.contract().representation;
+
+    let mut group = criterion.benchmark_group("relocalise");
+    group.bench_function("preprocess_yuyv_640x480", |b| {
+        b.iter(|| preprocess(&frame, &model.contract().input))
+    });
+    group.bench_function("inference_int8_default", |b| b.iter(|| model.run(&input)));
+    let fp32 = Path::new(env!("CARGO_MANIFEST_DIR")).join("models/squeezenet-half-point.fp32.onnx");
+    if let Ok(fp32) = Model::load(&fp32) {
+        group.bench_function("inference_fp32_default", |b| b.iter(|| fp32.run(&input)));
+    }
+    group.bench_function("decode_and_unfold", |b| {
+        b.iter(|| Prediction::decode(&raw, representation, 0.0).map(|prediction| prediction.hypotheses()))
+    });
+    let relocaliser = Relocaliser::new(model);
+    group.bench_function("whole_frame", |b| b.iter(|| relocaliser.relocalise(&frame, 0.0)));
+    group.finish();
+}
+
+criterion_group!(benches, stages);
+criterion_main!(benches);

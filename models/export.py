@@ -1,0 +1,149 @@
+"""Exports a trained network to ONNX with its contract in the metadata, quantises it to int8 (QDQ,
+calibrated on rendered frames) and writes a parity fixture of onnxruntime's outputs.
+
+    python models/export.py --run RUN_DIR --calibration DATA/val --name squeezenet-half-point \
+        --data-seed 1000 --data-frames 32000 [--keep-fp32]
+
+Writes models/<name>.int8.onnx (and models/<name>.fp32.onnx with --keep-fp32), and
+models/fixtures/parity/<name>.json with onnxruntime's outputs for the checked-in parity frames.
+"""
+
+import argparse
+import json
+import math
+import tempfile
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import onnx
+import onnxruntime
+import torch
+from onnxruntime.quantization import CalibrationDataReader, QuantFormat, QuantType, quantize_static
+from onnxruntime.quantization.shape_inference import quant_pre_process
+from PIL import Image
+
+from relocnet.data import load_recording
+from relocnet.nets import Exported, RelocNet, output_names
+
+MODELS = Path(__file__).resolve().parent
+REPO = MODELS.parent
+PARITY_FRAMES = MODELS / "fixtures" / "parity"
+MEAN, STD, SCALE = [0.5, 0.5, 0.5], [0.25, 0.25, 0.25], 1.0 / 255.0
+OUTPUT_MEANINGS = {
+    "position": "camera ground position (x, y) in the folded field, metres, field frame",
+    "heading": "camera ground heading in the folded field as (cos, sin); includes the head yaw",
+    "fold_probabilities": "probability that each fold bit is set, in the representation's bit order",
+    "position_sigma": "predicted standard deviation of the position, metres",
+    "heading_kappa": "predicted von Mises concentration of the heading",
+}
+
+
+def normalise(images_uint8):
+    """uint8 NHWC -> float32 NCHW, the contract's normalisation."""
+    x = images_uint8.astype(np.float32).transpose(0, 3, 1, 2) * SCALE
+    return ((x - np.array(MEAN, np.float32)[:, None, None]) / np.array(STD, np.float32)[:, None, None]).astype(np.float32)
+
+
+class Frames(CalibrationDataReader):
+    def __init__(self, images):
+        self.batches = iter([{"image": normalise(images[i : i + 1])} for i in range(len(images))])
+
+    def get_next(self):
+        return next(self.batches, None)
+
+
+def contract(args, log, representation, name, quantisation):
+    field = tomllib.loads((REPO / "src" / "geometry" / "spl_2025.toml").read_text())
+    train_args = log["args"]
+    return {
+        "contract_version": 1,
+        "model_id": f"{name}-{quantisation.split()[0]}-v1",
+        "representation": representation,
+        "input": {"name": "image", "shape": [1, 3, 120, 160], "layout": "NCHW", "colour": "RGB",
+                  "scale": SCALE, "mean": MEAN, "std": STD},
+        "outputs": {key: OUTPUT_MEANINGS[key] for key in output_names(representation)},
+        "field": field,
+        "camera": {"width": 640, "height": 480, "horizontal_fov": math.radians(54.7), "vertical_fov": math.radians(42.5)},
+        "training": {
+            "architecture": train_args["arch"], "width": float(train_args["width"]),
+            "macs": log["macs"], "parameters": log["parameters"],
+            "epochs": int(train_args["epochs"]), "seed": int(train_args["seed"]), "train_seconds": log["train_seconds"],
+            "data": {"renderer": "relocd render", "seed": args.data_seed, "frames": args.data_frames,
+                     "size": "160x120", "surroundings": "black"},
+            "calibration": {"recording": str(args.calibration.name), "frames": args.calibration_frames},
+            "quantisation": quantisation,
+        },
+    }
+
+
+def with_contract(path, document):
+    model = onnx.load(path)
+    del model.metadata_props[:]
+    entry = model.metadata_props.add()
+    entry.key, entry.value = "relocd.contract", json.dumps(document)
+    onnx.save(model, path)
+
+
+def last_gemm(path):
+    gemms = [node.name for node in onnx.load(path).graph.node if node.op_type == "Gemm"]
+    return gemms[-1]
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--run", required=True, type=Path, help="training output directory (weights.pt, training.json)")
+    parser.add_argument("--calibration", required=True, type=Path, help="rendered recording for int8 calibration")
+    parser.add_argument("--calibration-frames", type=int, default=512)
+    parser.add_argument("--name", required=True)
+    parser.add_argument("--data-seed", type=int, required=True)
+    parser.add_argument("--data-frames", type=int, required=True)
+    parser.add_argument("--keep-fp32", action="store_true")
+    args = parser.parse_args()
+
+    log = json.loads((args.run / "training.json").read_text())
+    train_args = log["args"]
+    representation = train_args["representation"]
+    net = RelocNet(train_args["arch"], float(train_args["width"]), representation)
+    net.load_state_dict(torch.load(args.run / "weights.pt"))
+    net.eval()
+    names = output_names(representation)
+
+    with tempfile.TemporaryDirectory() as scratch:
+        scratch = Path(scratch)
+        fp32 = scratch / "fp32.onnx"
+        torch.onnx.export(Exported(net), torch.zeros(1, 3, 120, 160), str(fp32), dynamo=False, opset_version=13,
+                          input_names=["image"], output_names=names, do_constant_folding=True)
+        prepared = scratch / "prepared.onnx"
+        quant_pre_process(str(fp32), str(prepared))
+        images, _ = load_recording(args.calibration)
+        int8 = MODELS / f"{args.name}.int8.onnx"
+        quantize_static(str(prepared), str(int8), Frames(images[: args.calibration_frames]),
+                        quant_format=QuantFormat.QDQ, per_channel=False, activation_type=QuantType.QUInt8,
+                        weight_type=QuantType.QInt8, nodes_to_exclude=[last_gemm(prepared)])
+        with_contract(int8, contract(args, log, representation, args.name,
+                                     "int8 QDQ, onnxruntime static MinMax calibration, per-tensor, output layer fp32"))
+        files = {"int8": int8}
+        if args.keep_fp32:
+            kept = MODELS / f"{args.name}.fp32.onnx"
+            onnx.save(onnx.load(fp32), kept)
+            with_contract(kept, contract(args, log, representation, args.name, "fp32 none"))
+            files["fp32"] = kept
+
+    fixture = {"tolerance": {"fp32": 1e-4, "int8": 1e-3}, "frames": []}
+    frames = sorted(PARITY_FRAMES.glob("*.png"))
+    for frame in frames:
+        x = normalise(np.asarray(Image.open(frame).convert("RGB"))[None])
+        entry = {"file": frame.name, "outputs": {}}
+        for kind, path in files.items():
+            session = onnxruntime.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+            values = session.run(names, {"image": x})
+            entry["outputs"][kind] = {name: value.reshape(-1).tolist() for name, value in zip(names, values)}
+        fixture["frames"].append(entry)
+    (PARITY_FRAMES / f"{args.name}.json").write_text(json.dumps(fixture, indent=1) + "\n")
+    for kind, path in files.items():
+        print(f"{kind}: {path.relative_to(REPO)} ({path.stat().st_size / 1e6:.2f} MB)")
+
+
+if __name__ == "__main__":
+    main()

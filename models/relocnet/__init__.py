@@ -1,0 +1,1 @@
+"""Training, export and quantisation of relocd's relocalisation networks."""

@@ -1,0 +1,33 @@
+"""Reading relocd recordings (frames.jsonl + frame files) into arrays, cached beside the recording."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+from PIL import Image
+
+
+def load_recording(directory, width=160, height=120):
+    """Returns (images uint8 [N, H, W, 3], poses float64 [N, 3] as x, y, theta).
+
+    Frames must already be `width` x `height` (render them at the model's size). The decoded arrays
+    are cached in `directory/frames-<W>x<H>.npz` and reused while frames.jsonl is unchanged.
+    """
+    directory = Path(directory)
+    index = directory / "frames.jsonl"
+    cache = directory / f"frames-{width}x{height}.npz"
+    if cache.exists() and cache.stat().st_mtime >= index.stat().st_mtime:
+        cached = np.load(cache)
+        return cached["images"], cached["poses"]
+    records = [json.loads(line) for line in index.read_text().splitlines() if line.strip()]
+    images = np.empty((len(records), height, width, 3), np.uint8)
+    poses = np.empty((len(records), 3), np.float64)
+    for i, record in enumerate(records):
+        image = Image.open(directory / record["file"]).convert("RGB")
+        if image.size != (width, height):
+            raise ValueError(f"{record['file']} is {image.size}, expected {(width, height)}")
+        images[i] = np.asarray(image)
+        pose = record["pose"]
+        poses[i] = (pose["x"], pose["y"], pose["theta"])
+    np.savez(cache, images=images, poses=poses)
+    return images, poses

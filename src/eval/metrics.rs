@@ -1,0 +1,306 @@
+//! The metrics themselves: pure functions over (truth, prediction) pairs.
+
+use serde::Serialize;
+
+use crate::geometry::angle::angle_distance;
+use crate::geometry::{FieldPose, FoldClass, Hypothesis, Representation};
+use crate::relocaliser::Prediction;
+
+/// One evaluated frame: the truth and what the model said.
+#[derive(Clone, Debug)]
+pub struct Sample {
+    /// The robot's true ground pose.
+    pub truth: FieldPose,
+    /// The camera's head yaw for this frame, radians.
+    pub head_yaw: f64,
+    /// The decoded prediction.
+    pub prediction: Prediction,
+}
+
+/// The errors of one frame, in the three forms.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Evaluation {
+    /// Folded prediction vs folded truth: (metres, degrees).
+    pub oracle: (f64, f64),
+    /// Heaviest hypothesis vs truth.
+    pub modelled: (f64, f64),
+    /// Closest hypothesis vs truth.
+    pub best_of_set: (f64, f64),
+    /// Mean over fold bits of |probability − true bit|.
+    pub fold_error: Option<f64>,
+    /// Distance of the true (folded) pose from the representation's fold boundary, metres.
+    pub distance_to_cut: Option<f64>,
+    /// The frame's predicted position standard deviation (lower is more confident).
+    pub position_sigma: f64,
+}
+
+impl Sample {
+    /// Scores this frame.
+    pub fn evaluate(&self) -> Evaluation {
+        let representation = self.prediction.folded.representation();
+        // The network predicts the camera's ground pose; fold the truth the same way.
+        let camera_truth =
+            FieldPose::new(self.truth.x(), self.truth.y(), self.truth.heading() + self.head_yaw)
+                .expect("finite truth");
+        let (folded_truth, class) = representation.fold(&camera_truth);
+        let folded = &self.prediction.folded;
+        let oracle = (
+            (folded.x() - folded_truth.x()).hypot(folded.y() - folded_truth.y()),
+            angle_distance(folded.heading(), folded_truth.heading()).to_degrees(),
+        );
+        let hypotheses = self.prediction.hypotheses();
+        let error = |hypothesis: &Hypothesis| {
+            (
+                hypothesis.pose.distance_to(&self.truth),
+                angle_distance(hypothesis.pose.heading(), self.truth.heading()).to_degrees(),
+            )
+        };
+        let modelled = error(&hypotheses[0]);
+        let best_of_set =
+            hypotheses.iter().map(error).min_by(|a, b| a.0.total_cmp(&b.0)).expect("at least one hypothesis");
+        let bits = representation.fold_bits();
+        let fold_error = (bits > 0).then(|| {
+            let FoldClass(class_bits) = class;
+            self.prediction
+                .fold_probabilities
+                .iter()
+                .enumerate()
+                .map(|(index, p)| (p - f64::from((class_bits >> index) & 1)).abs())
+                .sum::<f64>()
+                / bits as f64
+        });
+        let distance_to_cut = match representation {
+            Representation::Full => None,
+            Representation::HalfPoint => Some(folded_truth.x().abs()),
+            Representation::HalfLine => Some(folded_truth.y().abs()),
+            Representation::Quarter => Some(folded_truth.x().abs().min(folded_truth.y().abs())),
+        };
+        Evaluation {
+            oracle,
+            modelled,
+            best_of_set,
+            fold_error,
+            distance_to_cut,
+            position_sigma: self.prediction.position_sigma,
+        }
+    }
+}
+
+/// Mean and median location (m) and heading (°) errors, and the mean fold error where there is one.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ErrorStats {
+    /// Frames counted.
+    pub frames: usize,
+    /// Mean location error, metres.
+    pub location_mean_m: f64,
+    /// Median location error, metres.
+    pub location_median_m: f64,
+    /// Mean heading error, degrees.
+    pub heading_mean_deg: f64,
+    /// Median heading error, degrees.
+    pub heading_median_deg: f64,
+    /// Mean |fold probability − true bit|; 0.5 is guessing.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fold_error_mean: Option<f64>,
+}
+
+impl ErrorStats {
+    fn of(errors: &[(f64, f64)], fold_errors: &[f64]) -> Self {
+        let locations: Vec<f64> = errors.iter().map(|e| e.0).collect();
+        let headings: Vec<f64> = errors.iter().map(|e| e.1).collect();
+        Self {
+            frames: errors.len(),
+            location_mean_m: mean(&locations),
+            location_median_m: median(&locations),
+            heading_mean_deg: mean(&headings),
+            heading_median_deg: median(&headings),
+            fold_error_mean: (!fold_errors.is_empty()).then(|| mean(fold_errors)),
+        }
+    }
+}
+
+/// Median errors over the most confident share of frames.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Coverage {
+    /// Share of frames kept, most confident first.
+    pub fraction: f64,
+    /// Best-of-set errors over those frames.
+    pub best_of_set: ErrorStats,
+}
+
+/// Errors for frames whose true pose lies within a band of distances from the fold boundary.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct CutBand {
+    /// Band start, metres from the boundary.
+    pub from_m: f64,
+    /// Band end, metres (infinite for the last band).
+    pub to_m: f64,
+    /// Oracle errors within the band.
+    pub oracle: ErrorStats,
+}
+
+/// A whole evaluation, as written by `--metrics-json`.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Metrics {
+    /// Frames evaluated.
+    pub frames: usize,
+    /// Folded prediction vs folded truth.
+    pub oracle: ErrorStats,
+    /// Heaviest hypothesis vs truth.
+    pub modelled: ErrorStats,
+    /// Closest hypothesis vs truth.
+    pub best_of_set: ErrorStats,
+    /// Oracle errors by distance of the truth from the fold boundary.
+    pub by_distance_to_cut: Vec<CutBand>,
+    /// Best-of-set errors over the 50%, 80% and 100% most confident frames.
+    pub coverage: Vec<Coverage>,
+}
+
+/// Distance bands from the fold boundary, metres.
+const CUT_BANDS: [(f64, f64); 4] = [(0.0, 0.5), (0.5, 1.0), (1.0, 2.0), (2.0, f64::INFINITY)];
+
+impl Metrics {
+    /// Summarises per-frame evaluations; `None` if there are none.
+    pub fn summarise(evaluations: &[Evaluation]) -> Option<Self> {
+        if evaluations.is_empty() {
+            return None;
+        }
+        let fold_errors: Vec<f64> = evaluations.iter().filter_map(|e| e.fold_error).collect();
+        let column = |pick: fn(&Evaluation) -> (f64, f64), subset: &[&Evaluation]| {
+            subset.iter().map(|e| pick(e)).collect::<Vec<_>>()
+        };
+        let all: Vec<&Evaluation> = evaluations.iter().collect();
+        let by_distance_to_cut = CUT_BANDS
+            .iter()
+            .filter_map(|&(from, to)| {
+                let band: Vec<&Evaluation> = evaluations
+                    .iter()
+                    .filter(|e| e.distance_to_cut.is_some_and(|d| d >= from && d < to))
+                    .collect();
+                (!band.is_empty()).then(|| CutBand {
+                    from_m: from,
+                    to_m: to,
+                    oracle: ErrorStats::of(&column(|e| e.oracle, &band), &[]),
+                })
+            })
+            .collect();
+        let mut by_confidence = all.clone();
+        by_confidence.sort_by(|a, b| a.position_sigma.total_cmp(&b.position_sigma));
+        let coverage = [0.5, 0.8, 1.0]
+            .into_iter()
+            .map(|fraction| {
+                let kept = ((by_confidence.len() as f64 * fraction).ceil() as usize).max(1);
+                Coverage {
+                    fraction,
+                    best_of_set: ErrorStats::of(&column(|e| e.best_of_set, &by_confidence[..kept]), &[]),
+                }
+            })
+            .collect();
+        Some(Self {
+            frames: evaluations.len(),
+            oracle: ErrorStats::of(&column(|e| e.oracle, &all), &fold_errors),
+            modelled: ErrorStats::of(&column(|e| e.modelled, &all), &fold_errors),
+            best_of_set: ErrorStats::of(&column(|e| e.best_of_set, &all), &[]),
+            by_distance_to_cut,
+            coverage,
+        })
+    }
+
+    /// The thesis-style table, for people.
+    pub fn table(&self) -> String {
+        let mut text = format!(
+            "{:<12} {:>10} {:>10} {:>10} {:>10} {:>8}\n",
+            "form", "loc mean", "loc med", "head mean", "head med", "fold"
+        );
+        for (name, stats) in
+            [("oracle", &self.oracle), ("modelled", &self.modelled), ("best-of-set", &self.best_of_set)]
+        {
+            text += &format!(
+                "{:<12} {:>8.1}cm {:>8.1}cm {:>9.2}° {:>9.2}° {:>8}\n",
+                name,
+                100.0 * stats.location_mean_m,
+                100.0 * stats.location_median_m,
+                stats.heading_mean_deg,
+                stats.heading_median_deg,
+                stats.fold_error_mean.map_or("-".to_string(), |e| format!("{e:.3}")),
+            );
+        }
+        text + &format!("{} frames", self.frames)
+    }
+}
+
+fn mean(values: &[f64]) -> f64 {
+    values.iter().sum::<f64>() / values.len().max(1) as f64
+}
+
+fn median(values: &[f64]) -> f64 {
+    if values.is_empty() {
+        return f64::NAN;
+    }
+    let mut sorted = values.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let middle = sorted.len() / 2;
+    if sorted.len() % 2 == 0 { (sorted[middle - 1] + sorted[middle]) / 2.0 } else { sorted[middle] }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::Symmetry;
+    use crate::relocaliser::RawOutput;
+
+    fn sample(truth: FieldPose, predicted: FieldPose, probability: f32, sigma: f32) -> Sample {
+        let (folded, _) = Representation::HalfPoint.fold(&predicted);
+        let raw = RawOutput {
+            position: [folded.x() as f32, folded.y() as f32],
+            heading: [folded.heading().cos() as f32, folded.heading().sin() as f32],
+            fold_probabilities: vec![probability],
+            position_sigma: sigma,
+            heading_kappa: 400.0,
+        };
+        Sample {
+            truth,
+            head_yaw: 0.0,
+            prediction: Prediction::decode(&raw, Representation::HalfPoint, 0.0).unwrap(),
+        }
+    }
+
+    #[test]
+    fn a_confident_wrong_half_costs_modelled_but_not_best_of_set() {
+        let truth = FieldPose::new(2.0, 1.0, 0.5).unwrap();
+        let near = FieldPose::new(2.1, 1.0, 0.5).unwrap();
+        // Truth is in the opponent half (bit 1), the model is sure of bit 0.
+        let evaluation = sample(truth, near, 0.0, 0.2).evaluate();
+        assert!((evaluation.oracle.0 - 0.1).abs() < 1e-6);
+        assert!((evaluation.best_of_set.0 - 0.1).abs() < 1e-6);
+        let twin = Symmetry::PointReflection.apply(&near);
+        assert!((evaluation.modelled.0 - twin.distance_to(&truth)).abs() < 1e-6);
+        assert!((evaluation.modelled.1 - 180.0).abs() < 1e-3);
+        assert_eq!(evaluation.fold_error, Some(1.0));
+        assert_eq!(evaluation.distance_to_cut, Some(2.0));
+    }
+
+    #[test]
+    fn summary_reports_medians_bands_and_coverage() {
+        let truth = FieldPose::new(-1.0, 0.0, 0.0).unwrap();
+        let evaluations: Vec<Evaluation> = [0.1, 0.2, 0.3, 1.0]
+            .iter()
+            .enumerate()
+            .map(|(i, offset)| {
+                let predicted = FieldPose::new(-1.0, *offset, 0.0).unwrap();
+                sample(truth, predicted, 0.5, (i + 1) as f32).evaluate()
+            })
+            .collect();
+        let metrics = Metrics::summarise(&evaluations).unwrap();
+        assert_eq!(metrics.frames, 4);
+        assert!((metrics.oracle.location_median_m - 0.25).abs() < 1e-6);
+        assert!((metrics.oracle.location_mean_m - 0.4).abs() < 1e-6);
+        assert_eq!(metrics.oracle.fold_error_mean, Some(0.5));
+        assert_eq!(metrics.by_distance_to_cut.len(), 1);
+        assert_eq!(metrics.by_distance_to_cut[0].from_m, 1.0);
+        assert_eq!(metrics.coverage[0].best_of_set.frames, 2);
+        assert!((metrics.coverage[0].best_of_set.location_median_m - 0.15).abs() < 1e-6);
+        assert!(Metrics::summarise(&[]).is_none());
+        assert!(metrics.table().contains("oracle"));
+    }
+}

@@ -1,0 +1,7 @@
+//! Evaluation with the thesis' metrics: location and heading errors of the folded prediction
+//! (oracle), of the heaviest hypothesis (modelled) and of the closest hypothesis (best of set), the
+//! fold-bit error, errors by distance to the fold boundary, and accuracy against coverage.
+
+mod metrics;
+
+pub use metrics::{Coverage, ErrorStats, Evaluation, Metrics, Sample};

@@ -1,0 +1,25 @@
+//! The relocaliser: the model contract, preprocessing a camera frame into the network's input, running
+//! the network with tract, and decoding its outputs into weighted full-field hypotheses.
+
+pub mod contract;
+pub mod decode;
+pub mod model;
+pub mod pipeline;
+pub mod preprocess;
+
+pub use contract::{ContractError, InputSpec, ModelContract};
+pub use decode::{DecodeError, Prediction, RawOutput};
+pub use model::{Model, ModelError};
+pub use pipeline::{Relocalisation, RelocaliseError, Relocaliser, Timings};
+pub use preprocess::{InputTensor, PreprocessError, preprocess};
+
+/// File name of the default model (the int8 SqueezeNet half-point net) in `models/`.
+pub const DEFAULT_MODEL_NAME: &str = "squeezenet-half-point.int8.onnx";
+
+/// The default model, built into the binary so that relocd runs with no files beside it.
+pub const DEFAULT_MODEL: &[u8] = include_bytes!("../../models/squeezenet-half-point.int8.onnx");
+
+/// Loads the built-in default model.
+pub fn default_model() -> Result<Model, ModelError> {
+    Model::from_bytes(DEFAULT_MODEL, &format!("<built-in {DEFAULT_MODEL_NAME}>"))
+}

@@ -1,0 +1,157 @@
+//! Replaying a recording through the relocaliser: one JSON line per frame, and the thesis' metrics
+//! where the recording has true poses.
+
+use std::io::Write;
+
+use serde::Serialize;
+use tracing::warn;
+
+use crate::eval::{Metrics, Sample};
+use crate::geometry::FieldPose;
+use crate::recording::{FrameRecord, Recording};
+use crate::relocaliser::{Relocalisation, Relocaliser, Timings};
+
+/// A pose on the wire: metres and radians.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct WirePose {
+    /// x, metres.
+    pub x: f64,
+    /// y, metres.
+    pub y: f64,
+    /// Heading, radians.
+    pub theta: f64,
+}
+
+impl From<&FieldPose> for WirePose {
+    fn from(pose: &FieldPose) -> Self {
+        Self { x: pose.x(), y: pose.y(), theta: pose.heading() }
+    }
+}
+
+/// One weighted hypothesis on the wire.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct WireHypothesis {
+    /// The pose.
+    #[serde(flatten)]
+    pub pose: WirePose,
+    /// Its weight; a frame's weights sum to 1.
+    pub weight: f64,
+}
+
+/// The line written for one frame.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct FrameReport {
+    /// Frame file.
+    pub file: String,
+    /// Capture time, seconds.
+    pub t: f64,
+    /// The folded camera pose the network predicted.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub folded: Option<WirePose>,
+    /// Probability of each fold bit.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fold_probabilities: Option<Vec<f64>>,
+    /// Predicted position standard deviation, metres.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub position_sigma: Option<f64>,
+    /// Predicted heading standard deviation, radians.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub heading_sigma: Option<f64>,
+    /// Full-field hypotheses, heaviest first.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub hypotheses: Option<Vec<WireHypothesis>>,
+    /// Stage timings.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub timings: Option<Timings>,
+    /// The recorded true pose, if any.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub truth: Option<WirePose>,
+    /// Why this frame failed, if it did.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub error: Option<String>,
+}
+
+impl FrameReport {
+    fn success(record: &FrameRecord, result: &Relocalisation) -> Self {
+        let folded = &result.prediction.folded;
+        Self {
+            file: record.file.clone(),
+            t: record.t,
+            folded: Some(WirePose { x: folded.x(), y: folded.y(), theta: folded.heading() }),
+            fold_probabilities: Some(result.prediction.fold_probabilities.clone()),
+            position_sigma: Some(result.prediction.position_sigma),
+            heading_sigma: Some(result.prediction.heading_sigma),
+            hypotheses: Some(
+                result
+                    .hypotheses
+                    .iter()
+                    .map(|h| WireHypothesis { pose: WirePose::from(&h.pose), weight: h.weight })
+                    .collect(),
+            ),
+            timings: Some(result.timings),
+            truth: record.pose.as_ref().map(WirePose::from),
+            error: None,
+        }
+    }
+
+    fn failure(record: &FrameRecord, error: String) -> Self {
+        Self {
+            file: record.file.clone(),
+            t: record.t,
+            folded: None,
+            fold_probabilities: None,
+            position_sigma: None,
+            heading_sigma: None,
+            hypotheses: None,
+            timings: None,
+            truth: record.pose.as_ref().map(WirePose::from),
+            error: Some(error),
+        }
+    }
+}
+
+/// What a replay found.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ReplaySummary {
+    /// Frames in the recording.
+    pub frames: usize,
+    /// Frames that could not be relocalised (each reported on its line and in the log).
+    pub failed: usize,
+    /// The metrics over frames with a true pose, if any.
+    pub metrics: Option<Metrics>,
+}
+
+/// Relocalises every frame of `recording`, writing one JSON line per frame to `out`. A frame that
+/// fails is reported and skipped; only a failing `out` stops the replay.
+pub fn replay(
+    recording: &Recording,
+    relocaliser: &Relocaliser,
+    out: &mut impl Write,
+) -> std::io::Result<ReplaySummary> {
+    let mut evaluations = Vec::new();
+    let mut failed = 0;
+    for record in recording.records() {
+        let head_yaw = record.camera.map_or(0.0, |camera| camera.head_yaw());
+        let result = recording
+            .load_frame(record)
+            .map_err(|error| error.to_string())
+            .and_then(|frame| relocaliser.relocalise(&frame, head_yaw).map_err(|error| error.to_string()));
+        let report = match result {
+            Ok(result) => {
+                if let Some(truth) = record.pose {
+                    evaluations
+                        .push(Sample { truth, head_yaw, prediction: result.prediction.clone() }.evaluate());
+                }
+                FrameReport::success(record, &result)
+            }
+            Err(error) => {
+                warn!(file = %record.file, %error, "frame skipped");
+                failed += 1;
+                FrameReport::failure(record, error)
+            }
+        };
+        serde_json::to_writer(&mut *out, &report)?;
+        writeln!(out)?;
+    }
+    Ok(ReplaySummary { frames: recording.records().len(), failed, metrics: Metrics::summarise(&evaluations) })
+}
