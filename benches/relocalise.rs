@@ -1,13 +1,13 @@
 //! Per-stage latency of one relocalisation on the calling thread: YUYV 640×480 → input tensor,
-//! inference of the built-in int8 model and of its fp32 twin, decoding and unfolding, and the whole
-//! pipeline.
+//! inference of the built-in int8 model and of its fp32 twin, decoding and unfolding, fusing a burst of
+//! five frames, and the whole pipeline.
 
 use std::path::Path;
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use relocd::frame::{Frame, YuyvImage};
 use relocd::geometry::{Camera, CameraIntrinsics, FieldModel};
-use relocd::relocaliser::{Model, Prediction, Relocaliser, default_model, preprocess};
+use relocd::relocaliser::{Model, Prediction, Relocaliser, default_model, fuse, preprocess};
 use relocd::sim::{Randomisation, render};
 
 fn camera_frame() -> Frame {
@@ -36,6 +36,9 @@ fn stages(criterion: &mut Criterion) {
     group.bench_function("decode_and_unfold", |b| {
         b.iter(|| Prediction::decode(&raw, representation, 0.0).map(|prediction| prediction.hypotheses()))
     });
+    let prediction = Prediction::decode(&raw, representation, 0.0).unwrap();
+    let burst = vec![prediction; 5];
+    group.bench_function("fuse_burst_of_5", |b| b.iter(|| fuse(&burst)));
     let relocaliser = Relocaliser::new(model);
     group.bench_function("whole_frame", |b| b.iter(|| relocaliser.relocalise(&frame, 0.0)));
     group.finish();

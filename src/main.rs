@@ -77,6 +77,10 @@ struct RenderArgs {
     /// Largest head yaw in degrees (uniform in ±this); 0 looks along the robot's heading.
     #[arg(long, default_value_t = 0.0)]
     max_head_yaw: f64,
+    /// Frames per pose: bursts of a standing robot (camera sway, head yaw and noise vary) for testing
+    /// burst fusion with `replay --burst N`.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u16).range(1..=64))]
+    burst: u16,
     /// Camera height range in metres, MIN,MAX.
     #[arg(long, default_value = "0.45,0.53", value_parser = parse_range)]
     camera_height: RangeInclusive<f64>,
@@ -107,6 +111,10 @@ struct ReplayArgs {
     /// Write the metrics as JSON to this file.
     #[arg(long)]
     metrics_json: Option<PathBuf>,
+    /// Also fuse every N consecutive frames (one standing robot, e.g. `render --burst N`) and write one
+    /// more line per burst.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u16).range(1..=64))]
+    burst: u16,
 }
 
 #[derive(Debug, clap::Args)]
@@ -232,6 +240,7 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
         },
         count: args.count,
         seed: args.seed,
+        burst: args.burst.into(),
         frames_per_second: 30.0,
     };
     info!(out = %args.out.display(), count = args.count, seed = args.seed, width = args.width, height = args.height, "rendering");
@@ -284,8 +293,8 @@ fn replay(args: ReplayArgs) -> anyhow::Result<()> {
     );
     let relocaliser = Relocaliser::new(model);
     let stdout = std::io::stdout();
-    let summary =
-        relocd::replay::replay(&recording, &relocaliser, &mut stdout.lock()).context("writing results")?;
+    let summary = relocd::replay::replay(&recording, &relocaliser, args.burst.into(), &mut stdout.lock())
+        .context("writing results")?;
     if let Some(metrics) = &summary.metrics {
         eprintln!("{}", metrics.table());
         if let Some(path) = &args.metrics_json {

@@ -1,15 +1,15 @@
-//! Replaying a recording through the relocaliser: one JSON line per frame, and the thesis' metrics
-//! where the recording has true poses.
+//! Replaying a recording through the relocaliser: one JSON line per frame, optionally one per fused
+//! burst of consecutive frames, and the thesis' metrics where the recording has true poses.
 
 use std::io::Write;
 
 use serde::Serialize;
 use tracing::warn;
 
-use crate::eval::{Metrics, Sample};
+use crate::eval::{BurstEvaluation, Metrics, Sample};
 use crate::geometry::FieldPose;
 use crate::recording::{FrameRecord, Recording};
-use crate::relocaliser::{Relocalisation, Relocaliser, Timings};
+use crate::relocaliser::{BurstEstimate, PoseSigma, Relocalisation, Relocaliser, Timings, fuse};
 
 /// A pose on the wire: metres and radians.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
@@ -36,6 +36,67 @@ pub struct WireHypothesis {
     pub pose: WirePose,
     /// Its weight; a frame's weights sum to 1.
     pub weight: f64,
+}
+
+/// One fused hypothesis on the wire.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct WireFusedHypothesis {
+    /// The pose.
+    #[serde(flatten)]
+    pub pose: WirePose,
+    /// Its weight; a burst's weights sum to 1.
+    pub weight: f64,
+    /// Its spread.
+    pub sigma: PoseSigma,
+}
+
+/// The line written for a fused burst, after the lines of its frames.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct BurstReport {
+    /// The files of the frames in the burst.
+    pub burst: Vec<String>,
+    /// Fused full-field hypotheses, heaviest first.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub hypotheses: Option<Vec<WireFusedHypothesis>>,
+    /// Frames that agree with the fused pose.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub agreeing: Option<usize>,
+    /// The true pose of the burst's first frame, if recorded.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub truth: Option<WirePose>,
+    /// Why the burst could not be fused, if it could not.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub error: Option<String>,
+}
+
+impl BurstReport {
+    fn new(records: &[FrameRecord], estimate: Result<&BurstEstimate, String>) -> Self {
+        let (hypotheses, agreeing, error) = match estimate {
+            Ok(estimate) => (
+                Some(
+                    estimate
+                        .hypotheses
+                        .iter()
+                        .map(|h| WireFusedHypothesis {
+                            pose: WirePose::from(&h.pose),
+                            weight: h.weight,
+                            sigma: h.sigma,
+                        })
+                        .collect(),
+                ),
+                Some(estimate.agreeing),
+                None,
+            ),
+            Err(error) => (None, None, Some(error)),
+        };
+        Self {
+            burst: records.iter().map(|record| record.file.clone()).collect(),
+            hypotheses,
+            agreeing,
+            truth: records[0].pose.as_ref().map(WirePose::from),
+            error,
+        }
+    }
 }
 
 /// The line written for one frame.
@@ -121,37 +182,60 @@ pub struct ReplaySummary {
     pub metrics: Option<Metrics>,
 }
 
-/// Relocalises every frame of `recording`, writing one JSON line per frame to `out`. A frame that
-/// fails is reported and skipped; only a failing `out` stops the replay.
+/// Relocalises every frame of `recording`, writing one JSON line per frame to `out`; with `burst` > 1,
+/// every `burst` consecutive frames (a standing robot) are also fused and written as one more line. A
+/// frame that fails is reported and skipped; only a failing `out` stops the replay.
 pub fn replay(
     recording: &Recording,
     relocaliser: &Relocaliser,
+    burst: usize,
     out: &mut impl Write,
 ) -> std::io::Result<ReplaySummary> {
     let mut evaluations = Vec::new();
+    let mut burst_evaluations = Vec::new();
     let mut failed = 0;
-    for record in recording.records() {
-        let head_yaw = record.camera.map_or(0.0, |camera| camera.head_yaw());
-        let result = recording
-            .load_frame(record)
-            .map_err(|error| error.to_string())
-            .and_then(|frame| relocaliser.relocalise(&frame, head_yaw).map_err(|error| error.to_string()));
-        let report = match result {
-            Ok(result) => {
-                if let Some(truth) = record.pose {
-                    evaluations
-                        .push(Sample { truth, head_yaw, prediction: result.prediction.clone() }.evaluate());
+    for group in recording.records().chunks(burst.max(1)) {
+        let mut predictions = Vec::with_capacity(group.len());
+        for record in group {
+            let head_yaw = record.camera.map_or(0.0, |camera| camera.head_yaw());
+            let result = recording.load_frame(record).map_err(|error| error.to_string()).and_then(|frame| {
+                relocaliser.relocalise(&frame, head_yaw).map_err(|error| error.to_string())
+            });
+            let report = match result {
+                Ok(result) => {
+                    if let Some(truth) = record.pose {
+                        evaluations.push(
+                            Sample { truth, head_yaw, prediction: result.prediction.clone() }.evaluate(),
+                        );
+                    }
+                    let report = FrameReport::success(record, &result);
+                    predictions.push(result.prediction);
+                    report
                 }
-                FrameReport::success(record, &result)
+                Err(error) => {
+                    warn!(file = %record.file, %error, "frame skipped");
+                    failed += 1;
+                    FrameReport::failure(record, error)
+                }
+            };
+            write_line(out, &report)?;
+        }
+        if burst > 1 {
+            let estimate = fuse(&predictions);
+            if let (Ok(estimate), Some(truth)) = (&estimate, group[0].pose) {
+                burst_evaluations.push(BurstEvaluation::new(&truth, estimate));
             }
-            Err(error) => {
-                warn!(file = %record.file, %error, "frame skipped");
-                failed += 1;
-                FrameReport::failure(record, error)
-            }
-        };
-        serde_json::to_writer(&mut *out, &report)?;
-        writeln!(out)?;
+            write_line(out, &BurstReport::new(group, estimate.as_ref().map_err(ToString::to_string)))?;
+        }
     }
-    Ok(ReplaySummary { frames: recording.records().len(), failed, metrics: Metrics::summarise(&evaluations) })
+    Ok(ReplaySummary {
+        frames: recording.records().len(),
+        failed,
+        metrics: Metrics::summarise(&evaluations, &burst_evaluations),
+    })
+}
+
+fn write_line(out: &mut impl Write, value: &impl Serialize) -> std::io::Result<()> {
+    serde_json::to_writer(&mut *out, value)?;
+    writeln!(out)
 }

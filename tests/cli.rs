@@ -139,6 +139,41 @@ fn replay_with_no_arguments_runs_the_sample_through_the_default_model() {
 }
 
 #[test]
+fn replay_fuses_rendered_bursts_of_a_standing_robot() {
+    let dir = tempfile::tempdir().unwrap();
+    let recording = dir.path().join("bursts");
+    let args = ["--count", "6", "--seed", "11", "--width", "160", "--height", "120", "--burst", "3"];
+    let rendered = relocd(&[&["render", "--out", recording.to_str().unwrap()][..], &args[..]].concat());
+    assert!(rendered.status.success(), "{}", stderr(&rendered));
+    let metrics_path = dir.path().join("metrics.json");
+    let output = relocd(&[
+        "replay",
+        recording.to_str().unwrap(),
+        "--burst",
+        "3",
+        "--metrics-json",
+        metrics_path.to_str().unwrap(),
+    ]);
+    assert!(output.status.success(), "{}", stderr(&output));
+    let lines: Vec<serde_json::Value> =
+        stdout(&output).lines().map(|line| serde_json::from_str(line).unwrap()).collect();
+    assert_eq!(lines.len(), 8, "3 frame lines and 1 burst line, twice");
+    for burst in [&lines[3], &lines[7]] {
+        assert_eq!(burst["burst"].as_array().unwrap().len(), 3, "{burst}");
+        let hypotheses = burst["hypotheses"].as_array().unwrap();
+        let weights: f64 = hypotheses.iter().map(|h| h["weight"].as_f64().unwrap()).sum();
+        assert!((weights - 1.0).abs() < 1e-6, "{burst}");
+        assert!(hypotheses[0]["sigma"]["theta"].as_f64().unwrap() > 0.0, "{burst}");
+        assert!(burst["truth"].is_object());
+    }
+    let metrics: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&metrics_path).unwrap()).unwrap();
+    assert_eq!(metrics["bursts"]["bursts"], 2);
+    assert!(metrics["bursts"]["best_of_set"]["location_median_m"].is_number());
+    assert!(stderr(&output).contains("burst best"));
+}
+
+#[test]
 fn replay_reports_a_bad_frame_and_goes_on() {
     let dir = tempfile::tempdir().unwrap();
     let model = Path::new(env!("CARGO_MANIFEST_DIR")).join("models/fixtures/tiny/valid.onnx");

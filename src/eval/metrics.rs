@@ -4,7 +4,7 @@ use serde::Serialize;
 
 use crate::geometry::angle::angle_distance;
 use crate::geometry::{FieldPose, FoldClass, Hypothesis, Representation};
-use crate::relocaliser::Prediction;
+use crate::relocaliser::{BurstEstimate, Prediction};
 
 /// One evaluated frame: the truth and what the model said.
 #[derive(Clone, Debug)]
@@ -86,6 +86,70 @@ impl Sample {
     }
 }
 
+/// One evaluated burst: the fused hypotheses against the true pose of the standing robot.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BurstEvaluation {
+    /// Heaviest fused hypothesis vs truth: (metres, degrees).
+    pub modelled: (f64, f64),
+    /// Closest fused hypothesis vs truth.
+    pub best_of_set: (f64, f64),
+    /// The heaviest hypothesis' position spread, √(σx² + σy²) (lower is more confident).
+    pub position_sigma: f64,
+}
+
+impl BurstEvaluation {
+    /// Scores a fused burst against the robot's true pose.
+    pub fn new(truth: &FieldPose, estimate: &BurstEstimate) -> Self {
+        let errors: Vec<(f64, f64)> = estimate
+            .hypotheses
+            .iter()
+            .map(|h| {
+                (h.pose.distance_to(truth), angle_distance(h.pose.heading(), truth.heading()).to_degrees())
+            })
+            .collect();
+        let heaviest = &estimate.hypotheses[0];
+        Self {
+            modelled: errors[0],
+            best_of_set: *errors.iter().min_by(|a, b| a.0.total_cmp(&b.0)).expect("at least one hypothesis"),
+            position_sigma: heaviest.sigma.x.hypot(heaviest.sigma.y),
+        }
+    }
+}
+
+/// Errors of fused bursts.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct BurstMetrics {
+    /// Bursts evaluated.
+    pub bursts: usize,
+    /// Heaviest fused hypothesis vs truth.
+    pub modelled: ErrorStats,
+    /// Closest fused hypothesis vs truth.
+    pub best_of_set: ErrorStats,
+    /// Best-of-set errors over the 50%, 80% and 100% most confident bursts.
+    pub coverage: Vec<Coverage>,
+}
+
+impl BurstMetrics {
+    /// Summarises burst evaluations; `None` if there are none.
+    pub fn summarise(evaluations: &[BurstEvaluation]) -> Option<Self> {
+        if evaluations.is_empty() {
+            return None;
+        }
+        let column =
+            |pick: fn(&BurstEvaluation) -> (f64, f64)| evaluations.iter().map(pick).collect::<Vec<_>>();
+        let mut by_confidence: Vec<(f64, (f64, f64))> =
+            evaluations.iter().map(|e| (e.position_sigma, e.best_of_set)).collect();
+        by_confidence.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let errors: Vec<(f64, f64)> = by_confidence.iter().map(|(_, error)| *error).collect();
+        Some(Self {
+            bursts: evaluations.len(),
+            modelled: ErrorStats::of(&column(|e| e.modelled), &[]),
+            best_of_set: ErrorStats::of(&column(|e| e.best_of_set), &[]),
+            coverage: Coverage::of(&errors),
+        })
+    }
+}
+
 /// Mean and median location (m) and heading (°) errors, and the mean fold error where there is one.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct ErrorStats {
@@ -128,6 +192,19 @@ pub struct Coverage {
     pub best_of_set: ErrorStats,
 }
 
+impl Coverage {
+    /// Coverage at 50%, 80% and 100% of best-of-set errors sorted most confident first.
+    fn of(most_confident_first: &[(f64, f64)]) -> Vec<Self> {
+        [0.5, 0.8, 1.0]
+            .into_iter()
+            .map(|fraction| {
+                let kept = ((most_confident_first.len() as f64 * fraction).ceil() as usize).max(1);
+                Coverage { fraction, best_of_set: ErrorStats::of(&most_confident_first[..kept], &[]) }
+            })
+            .collect()
+    }
+}
+
 /// Errors for frames whose true pose lies within a band of distances from the fold boundary.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct CutBand {
@@ -154,14 +231,17 @@ pub struct Metrics {
     pub by_distance_to_cut: Vec<CutBand>,
     /// Best-of-set errors over the 50%, 80% and 100% most confident frames.
     pub coverage: Vec<Coverage>,
+    /// Fused bursts, when the replay fused them.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub bursts: Option<BurstMetrics>,
 }
 
 /// Distance bands from the fold boundary, metres.
 const CUT_BANDS: [(f64, f64); 4] = [(0.0, 0.5), (0.5, 1.0), (1.0, 2.0), (2.0, f64::INFINITY)];
 
 impl Metrics {
-    /// Summarises per-frame evaluations; `None` if there are none.
-    pub fn summarise(evaluations: &[Evaluation]) -> Option<Self> {
+    /// Summarises per-frame and per-burst evaluations; `None` if there are no frames.
+    pub fn summarise(evaluations: &[Evaluation], bursts: &[BurstEvaluation]) -> Option<Self> {
         if evaluations.is_empty() {
             return None;
         }
@@ -186,16 +266,7 @@ impl Metrics {
             .collect();
         let mut by_confidence = all.clone();
         by_confidence.sort_by(|a, b| a.position_sigma.total_cmp(&b.position_sigma));
-        let coverage = [0.5, 0.8, 1.0]
-            .into_iter()
-            .map(|fraction| {
-                let kept = ((by_confidence.len() as f64 * fraction).ceil() as usize).max(1);
-                Coverage {
-                    fraction,
-                    best_of_set: ErrorStats::of(&column(|e| e.best_of_set, &by_confidence[..kept]), &[]),
-                }
-            })
-            .collect();
+        let coverage = Coverage::of(&column(|e| e.best_of_set, &by_confidence));
         Some(Self {
             frames: evaluations.len(),
             oracle: ErrorStats::of(&column(|e| e.oracle, &all), &fold_errors),
@@ -203,19 +274,14 @@ impl Metrics {
             best_of_set: ErrorStats::of(&column(|e| e.best_of_set, &all), &[]),
             by_distance_to_cut,
             coverage,
+            bursts: BurstMetrics::summarise(bursts),
         })
     }
 
     /// The thesis-style table, for people.
     pub fn table(&self) -> String {
-        let mut text = format!(
-            "{:<12} {:>10} {:>10} {:>10} {:>10} {:>8}\n",
-            "form", "loc mean", "loc med", "head mean", "head med", "fold"
-        );
-        for (name, stats) in
-            [("oracle", &self.oracle), ("modelled", &self.modelled), ("best-of-set", &self.best_of_set)]
-        {
-            text += &format!(
+        let row = |name: &str, stats: &ErrorStats| {
+            format!(
                 "{:<12} {:>8.1}cm {:>8.1}cm {:>9.2}° {:>9.2}° {:>8}\n",
                 name,
                 100.0 * stats.location_mean_m,
@@ -223,9 +289,22 @@ impl Metrics {
                 stats.heading_mean_deg,
                 stats.heading_median_deg,
                 stats.fold_error_mean.map_or("-".to_string(), |e| format!("{e:.3}")),
-            );
+            )
+        };
+        let mut text = format!(
+            "{:<12} {:>10} {:>10} {:>10} {:>10} {:>8}\n",
+            "form", "loc mean", "loc med", "head mean", "head med", "fold"
+        );
+        text += &row("oracle", &self.oracle);
+        text += &row("modelled", &self.modelled);
+        text += &row("best-of-set", &self.best_of_set);
+        let mut counts = format!("{} frames", self.frames);
+        if let Some(bursts) = &self.bursts {
+            text += &row("burst model", &bursts.modelled);
+            text += &row("burst best", &bursts.best_of_set);
+            counts += &format!(", {} bursts", bursts.bursts);
         }
-        text + &format!("{} frames", self.frames)
+        text + &counts
     }
 }
 
@@ -291,7 +370,7 @@ mod tests {
                 sample(truth, predicted, 0.5, (i + 1) as f32).evaluate()
             })
             .collect();
-        let metrics = Metrics::summarise(&evaluations).unwrap();
+        let metrics = Metrics::summarise(&evaluations, &[]).unwrap();
         assert_eq!(metrics.frames, 4);
         assert!((metrics.oracle.location_median_m - 0.25).abs() < 1e-6);
         assert!((metrics.oracle.location_mean_m - 0.4).abs() < 1e-6);
@@ -300,7 +379,8 @@ mod tests {
         assert_eq!(metrics.by_distance_to_cut[0].from_m, 1.0);
         assert_eq!(metrics.coverage[0].best_of_set.frames, 2);
         assert!((metrics.coverage[0].best_of_set.location_median_m - 0.15).abs() < 1e-6);
-        assert!(Metrics::summarise(&[]).is_none());
+        assert!(Metrics::summarise(&[], &[]).is_none());
+        assert!(metrics.bursts.is_none());
         assert!(metrics.table().contains("oracle"));
     }
 }

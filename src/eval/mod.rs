@@ -4,4 +4,4 @@
 
 mod metrics;
 
-pub use metrics::{Coverage, ErrorStats, Evaluation, Metrics, Sample};
+pub use metrics::{BurstEvaluation, BurstMetrics, Coverage, ErrorStats, Evaluation, Metrics, Sample};

@@ -3,12 +3,14 @@
 
 pub mod contract;
 pub mod decode;
+pub mod fusion;
 pub mod model;
 pub mod pipeline;
 pub mod preprocess;
 
 pub use contract::{ContractError, InputSpec, ModelContract};
 pub use decode::{DecodeError, Prediction, RawOutput};
+pub use fusion::{BurstEstimate, FusedHypothesis, FusionError, PoseSigma, fuse};
 pub use model::{Model, ModelError};
 pub use pipeline::{Relocalisation, RelocaliseError, Relocaliser, Timings};
 pub use preprocess::{InputTensor, PreprocessError, preprocess};

@@ -27,6 +27,8 @@ pub struct DatasetSpec {
     pub count: u64,
     /// Seed: the same seed gives the same frames.
     pub seed: u64,
+    /// Frames per standing pose (see [`Randomisation::sample_in_burst`]); 1 gives independent frames.
+    pub burst: u64,
     /// Frame rate used for the `t` of each frame.
     pub frames_per_second: f64,
 }
@@ -46,7 +48,14 @@ pub fn render_dataset(
         let records: Vec<FrameRecord> = (start..end)
             .into_par_iter()
             .map(|index| {
-                let frame = spec.randomisation.sample(&spec.field, spec.seed, index, spec.supersample);
+                let burst = spec.burst.max(1);
+                let frame = spec.randomisation.sample_in_burst(
+                    &spec.field,
+                    spec.seed,
+                    index / burst,
+                    index % burst,
+                    spec.supersample,
+                );
                 let camera = Camera::new(spec.intrinsics, &frame.pose, &frame.camera);
                 let image = render(&frame.scene, &camera, &frame.settings);
                 let record = FrameRecord {
@@ -90,6 +99,7 @@ mod tests {
             format,
             count,
             seed: 5,
+            burst: 1,
             frames_per_second: 30.0,
         }
     }
@@ -110,6 +120,16 @@ mod tests {
         assert!((last.t - 10.0 / 30.0).abs() < 1e-12);
         assert!(last.pose.is_some() && last.camera.is_some());
         assert_eq!(recording.load_frame(last).unwrap().dimensions(), (32, 24));
+    }
+
+    #[test]
+    fn bursts_share_a_pose() {
+        let dir = tempfile::tempdir().unwrap();
+        render_dataset(&DatasetSpec { burst: 3, ..spec(6, FrameFormat::Png) }, dir.path(), || {}).unwrap();
+        let poses: Vec<_> = Recording::open(dir.path()).unwrap().records().iter().map(|r| r.pose).collect();
+        assert_eq!((poses[0], poses[1]), (poses[2], poses[2]));
+        assert_eq!((poses[3], poses[4]), (poses[5], poses[5]));
+        assert_ne!(poses[0], poses[3]);
     }
 
     #[test]

@@ -192,6 +192,44 @@ impl Randomisation {
         };
         SampledFrame { pose, camera, scene, settings }
     }
+
+    /// Draws frame `frame` of burst `burst` of the sequence `seed`: a robot standing still, so the pose
+    /// and scene of frame 0 (which equals `sample(field, seed, burst, …)`) with the camera swaying by up
+    /// to a degree in pitch and roll, a fresh head yaw where the head may turn, and fresh sensor noise.
+    pub fn sample_in_burst(
+        &self,
+        field: &FieldModel,
+        seed: u64,
+        burst: u64,
+        frame: u64,
+        supersample: u32,
+    ) -> SampledFrame {
+        let still = self.sample(field, seed, burst, supersample);
+        if frame == 0 {
+            return still;
+        }
+        let mut rng = ChaCha8Rng::seed_from_u64(
+            mix_bits(seed ^ 0xb0257) ^ mix_bits(burst.wrapping_add(0x5eed)) ^ mix_bits(frame),
+        );
+        let sway = 1.0f64.to_radians();
+        let limit = 89.9f64.to_radians();
+        let swayed =
+            |angle: f64, rng: &mut ChaCha8Rng| (angle + rng.random_range(-sway..=sway)).clamp(-limit, limit);
+        let head_yaw = if self.max_head_yaw > 0.0 {
+            rng.random_range(-self.max_head_yaw..=self.max_head_yaw)
+        } else {
+            0.0
+        };
+        let camera = CameraPose::new(
+            still.camera.height(),
+            swayed(still.camera.pitch(), &mut rng),
+            swayed(still.camera.roll(), &mut rng),
+            head_yaw,
+        )
+        .expect("a degree of sway keeps the camera pose valid");
+        let settings = RenderSettings { noise_seed: rng.random(), ..still.settings };
+        SampledFrame { camera, settings, ..still }
+    }
 }
 
 #[cfg(test)]
@@ -206,6 +244,20 @@ mod tests {
         assert_eq!(first, randomisation.sample(&field, 1, 0, 2));
         assert_ne!(first.pose, randomisation.sample(&field, 1, 1, 2).pose);
         assert_ne!(first.pose, randomisation.sample(&field, 2, 0, 2).pose);
+    }
+
+    #[test]
+    fn a_burst_keeps_pose_and_scene_and_varies_the_camera() {
+        let field = FieldModel::default();
+        let randomisation = Randomisation { max_head_yaw: 0.5, ..Randomisation::default() };
+        let first = randomisation.sample_in_burst(&field, 3, 7, 0, 1);
+        assert_eq!(first, randomisation.sample(&field, 3, 7, 1));
+        let later = randomisation.sample_in_burst(&field, 3, 7, 2, 1);
+        assert_eq!((later.pose, &later.scene), (first.pose, &first.scene));
+        assert_ne!(later.camera, first.camera);
+        assert!((later.camera.pitch() - first.camera.pitch()).abs() <= 1f64.to_radians() + 1e-12);
+        assert_ne!(later.settings.noise_seed, first.settings.noise_seed);
+        assert_eq!(later, randomisation.sample_in_burst(&field, 3, 7, 2, 1));
     }
 
     #[test]
