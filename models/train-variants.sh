@@ -19,8 +19,8 @@ declare -A VARIANTS=(
   [squeezenet-half-line]="squeezenet 0.5 half-line 8"
   [squeezenet-quarter]="squeezenet 0.5 quarter 8"
   [squeezenet-full]="squeezenet 0.5 full 8"
-  [alexnet-half-point]="alexnet 0.25 half-point 4"
-  [alexnet-full]="alexnet 0.25 full 4"
+  [alexnet-half-point]="alexnet 0.25 half-point 8"
+  [alexnet-full]="alexnet 0.25 full 8"
 )
 
 cd "$(dirname "$0")"

@@ -9,4 +9,6 @@ pub mod geometry;
 pub mod recording;
 pub mod relocaliser;
 pub mod replay;
+#[cfg(feature = "report")]
+pub mod report;
 pub mod sim;

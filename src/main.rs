@@ -115,6 +115,10 @@ struct ReplayArgs {
     /// more line per burst.
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u16).range(1..=64))]
     burst: u16,
+    /// Write plots (error scatter, field map with true and predicted poses) as PNG into this directory.
+    #[cfg(feature = "report")]
+    #[arg(long, value_name = "DIR")]
+    report: Option<PathBuf>,
 }
 
 #[derive(Debug, clap::Args)]
@@ -291,10 +295,18 @@ fn replay(args: ReplayArgs) -> anyhow::Result<()> {
         frames = recording.records().len(),
         "replaying"
     );
+    #[cfg(feature = "report")]
+    let field = FieldModel::new(contract.field.clone());
     let relocaliser = Relocaliser::new(model);
     let stdout = std::io::stdout();
     let summary = relocd::replay::replay(&recording, &relocaliser, args.burst.into(), &mut stdout.lock())
         .context("writing results")?;
+    #[cfg(feature = "report")]
+    if let Some(directory) = &args.report {
+        let written =
+            relocd::report::write_report(directory, &summary.evaluations, &field).context("--report")?;
+        info!(plots = ?written, "report written");
+    }
     if let Some(metrics) = &summary.metrics {
         eprintln!("{}", metrics.table());
         if let Some(path) = &args.metrics_json {

@@ -6,7 +6,7 @@ use std::io::Write;
 use serde::Serialize;
 use tracing::warn;
 
-use crate::eval::{BurstEvaluation, Metrics, Sample};
+use crate::eval::{BurstEvaluation, Evaluation, Metrics, Sample};
 use crate::geometry::FieldPose;
 use crate::recording::{FrameRecord, Recording};
 use crate::relocaliser::{BurstEstimate, PoseSigma, Relocalisation, Relocaliser, Timings, fuse};
@@ -180,6 +180,8 @@ pub struct ReplaySummary {
     pub failed: usize,
     /// The metrics over frames with a true pose, if any.
     pub metrics: Option<Metrics>,
+    /// Each frame with a true pose, evaluated (for plots).
+    pub evaluations: Vec<Evaluation>,
 }
 
 /// Relocalises every frame of `recording`, writing one JSON line per frame to `out`; with `burst` > 1,
@@ -232,6 +234,7 @@ pub fn replay(
         frames: recording.records().len(),
         failed,
         metrics: Metrics::summarise(&evaluations, &burst_evaluations),
+        evaluations,
     })
 }
 

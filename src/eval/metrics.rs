@@ -20,6 +20,10 @@ pub struct Sample {
 /// The errors of one frame, in the three forms.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Evaluation {
+    /// The robot's true pose.
+    pub truth: FieldPose,
+    /// The hypothesis closest to the truth.
+    pub closest: FieldPose,
     /// Folded prediction vs folded truth: (metres, degrees).
     pub oracle: (f64, f64),
     /// Heaviest hypothesis vs truth.
@@ -56,8 +60,11 @@ impl Sample {
             )
         };
         let modelled = error(&hypotheses[0]);
-        let best_of_set =
-            hypotheses.iter().map(error).min_by(|a, b| a.0.total_cmp(&b.0)).expect("at least one hypothesis");
+        let closest = hypotheses
+            .iter()
+            .min_by(|a, b| a.pose.distance_to(&self.truth).total_cmp(&b.pose.distance_to(&self.truth)))
+            .expect("at least one hypothesis");
+        let best_of_set = error(closest);
         let bits = representation.fold_bits();
         let fold_error = (bits > 0).then(|| {
             let FoldClass(class_bits) = class;
@@ -76,6 +83,8 @@ impl Sample {
             Representation::Quarter => Some(folded_truth.x().abs().min(folded_truth.y().abs())),
         };
         Evaluation {
+            truth: self.truth,
+            closest: closest.pose,
             oracle,
             modelled,
             best_of_set,
