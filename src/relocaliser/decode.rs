@@ -2,8 +2,8 @@
 //! hypotheses.
 //!
 //! The network sees the camera, so it predicts the ground pose of the camera (its heading includes the
-//! head yaw). Unfolding happens on that pose; the head yaw is taken off each hypothesis afterwards, which
-//! keeps the hypotheses mutually symmetric as robot poses too.
+//! head yaw). Unfolding happens on that pose, giving the symmetric camera poses the image could come
+//! from; the measured head yaw is then taken off each of them to give the robot's pose.
 
 use thiserror::Error;
 
