@@ -69,6 +69,7 @@ def contract(args, log, representation, name, quantisation):
             "architecture": train_args["arch"], "width": float(train_args["width"]),
             "macs": log["macs"], "parameters": log["parameters"],
             "epochs": int(train_args["epochs"]), "seed": int(train_args["seed"]), "train_seconds": log["train_seconds"],
+            "continued_from": log.get("continued_from"),
             "data": {"renderer": "relocd render", "seed": args.data_seed, "frames": args.data_frames,
                      "size": "160x120", "surroundings": "black"},
             "calibration": {"recording": str(args.calibration.name), "frames": args.calibration_frames},

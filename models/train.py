@@ -109,6 +109,7 @@ def main():
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--limit", type=int, default=0, help="use only the first N training frames (0: all)")
+    parser.add_argument("--init", type=Path, help="continue from this run directory's weights.pt (a new schedule)")
     parser.add_argument("--out", required=True, type=Path)
     args = parser.parse_args()
 
@@ -128,6 +129,9 @@ def main():
     val_images = torch.from_numpy(val_images)
 
     net = RelocNet(args.arch, args.width, args.representation).to(memory_format=torch.channels_last)
+    if args.init:
+        net.load_state_dict(torch.load(args.init / "weights.pt"))
+        print(f"continuing from {args.init}")
     macs, parameters = count_macs(net), count_parameters(net)
     print(f"{args.arch} width {args.width} {args.representation}: {macs / 1e6:.1f} M MACs, {parameters / 1e6:.2f} M parameters")
     steps_per_epoch = len(train_images) // args.batch
@@ -136,6 +140,10 @@ def main():
         optimiser, max_lr=args.lr, total_steps=args.epochs * steps_per_epoch, pct_start=0.15
     )
     log = {"args": {k: str(v) for k, v in vars(args).items()}, "macs": macs, "parameters": parameters, "epochs": []}
+    if args.init:
+        earlier = json.loads((args.init / "training.json").read_text())
+        log["continued_from"] = {"run": args.init.name, "epochs": len(earlier["epochs"]),
+                                 "train_seconds": earlier["train_seconds"], "lr": earlier["args"]["lr"]}
     started = time.time()
     for epoch in range(args.epochs):
         order = torch.randperm(len(train_images), generator=generator)
