@@ -131,7 +131,9 @@ def main():
             with_contract(kept, contract(args, log, representation, args.name, "fp32 none"))
             files["fp32"] = kept
 
-    fixture = {"tolerance": {"fp32": 1e-4, "int8": 1e-3}, "frames": []}
+    # Relative tolerances. int8: tract and onnxruntime agree to ~1e-6 on most frames, but an activation on
+    # a rounding tie can land one int8 step apart; measured 1.5e-3 on one frame of alexnet-full.
+    fixture = {"tolerance": {"fp32": 1e-4, "int8": 5e-3}, "frames": []}
     frames = sorted(PARITY_FRAMES.glob("*.png"))
     for frame in frames:
         x = normalise(np.asarray(Image.open(frame).convert("RGB"))[None])
