@@ -131,9 +131,11 @@ def main():
             with_contract(kept, contract(args, log, representation, args.name, "fp32 none"))
             files["fp32"] = kept
 
-    # Relative tolerances. int8: tract and onnxruntime agree to ~1e-6 on most frames, but an activation on
-    # a rounding tie can land one int8 step apart; measured 1.5e-3 on one frame of alexnet-full.
-    fixture = {"tolerance": {"fp32": 1e-4, "int8": 5e-3}, "frames": []}
+    # Relative tolerances. fp32 is the strict check of the wiring (preprocessing, layout, output order).
+    # int8: onnxruntime runs QDQ as integer convolutions, tract as f32 convolutions between Quantize and
+    # Dequantize, so an activation near a rounding boundary can land one int8 step apart. Most frames agree
+    # to 1e-6; measured worst 1.0e-2 (default model, one frame's position), so 2e-2.
+    fixture = {"tolerance": {"fp32": 1e-4, "int8": 2e-2}, "frames": []}
     frames = sorted(PARITY_FRAMES.glob("*.png"))
     for frame in frames:
         x = normalise(np.asarray(Image.open(frame).convert("RGB"))[None])
