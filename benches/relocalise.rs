@@ -44,5 +44,11 @@ fn stages(criterion: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, stages);
+// No HTML plots: the figures that matter are the medians printed, and criterion's plotting would meet
+// the `ab_glyph` font backend that relocd's own plots enable in plotters, with no font registered.
+criterion_group! {
+    name = benches;
+    config = Criterion::default().without_plots();
+    targets = stages
+}
 criterion_main!(benches);
