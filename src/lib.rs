@@ -5,6 +5,7 @@
 
 pub mod eval;
 pub mod frame;
+pub mod gamecontroller;
 pub mod geometry;
 pub mod recording;
 pub mod relocaliser;
