@@ -7,6 +7,7 @@ pub mod eval;
 pub mod frame;
 pub mod gamecontroller;
 pub mod geometry;
+pub mod posture;
 pub mod recording;
 pub mod relocaliser;
 pub mod replay;
