@@ -7,6 +7,7 @@ pub mod fusion;
 pub mod model;
 pub mod pipeline;
 pub mod preprocess;
+pub mod prior;
 
 pub use contract::{ContractError, InputSpec, ModelContract};
 pub use decode::{DecodeError, Prediction, RawOutput};
@@ -14,6 +15,7 @@ pub use fusion::{BurstEstimate, FusedHypothesis, FusionError, PoseSigma, fuse};
 pub use model::{Model, ModelError};
 pub use pipeline::{Relocalisation, RelocaliseError, Relocaliser, Timings};
 pub use preprocess::{InputTensor, PreprocessError, preprocess};
+pub use prior::PlacementPrior;
 
 /// File name of the default model (the int8 SqueezeNet half-point net) in `models/`.
 pub const DEFAULT_MODEL_NAME: &str = "squeezenet-half-point.int8.onnx";
