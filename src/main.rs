@@ -13,7 +13,8 @@ use tracing::info;
 
 use relocd::geometry::{CameraIntrinsics, FieldDimensions, FieldModel};
 use relocd::recording::{FrameFormat, Recording};
-use relocd::relocaliser::{self, Model, Relocaliser};
+use relocd::relocaliser::{self, Model, PlacementPrior, Relocaliser};
+use relocd::replay::ReplayOptions;
 use relocd::sim::{DatasetSpec, Randomisation, render_dataset};
 
 /// Relocalise a Nao on the SPL field from one camera image.
@@ -77,6 +78,9 @@ struct RenderArgs {
     /// Largest head yaw in degrees (uniform in ±this); 0 looks along the robot's heading.
     #[arg(long, default_value_t = 0.0)]
     max_head_yaw: f64,
+    /// Where poses are drawn: uniform over the carpet, or where a robot is put back after a penalty.
+    #[arg(long, value_enum, default_value_t = PosesArg::Uniform)]
+    poses: PosesArg,
     /// Frames per pose: bursts of a standing robot (camera sway, head yaw and noise vary) for testing
     /// burst fusion with `replay --burst N`.
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u16).range(1..=64))]
@@ -115,6 +119,10 @@ struct ReplayArgs {
     /// more line per burst.
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u16).range(1..=64))]
     burst: u16,
+    /// Re-weight each burst's fused hypotheses with a game-context prior (a burst of one frame per frame
+    /// when --burst is 1); the burst metrics then show what the prior buys.
+    #[arg(long, value_enum)]
+    prior: Option<PriorArg>,
     /// Write plots (error scatter, field map with true and predicted poses) as PNG into this directory.
     #[cfg(feature = "report")]
     #[arg(long, value_name = "DIR")]
@@ -134,6 +142,20 @@ enum SurroundingsArg {
     Black,
     /// A hall with random coloured wall panels: breaks the symmetry.
     Asymmetric,
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum PosesArg {
+    /// Uniform over the carpet, any heading.
+    Uniform,
+    /// Beside either touchline in the own half, facing the field (the penalty-return placement).
+    PenaltyReturn,
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum PriorArg {
+    /// The robot was put back after a penalty: own half, beside a touchline, facing the field.
+    PenaltyReturn,
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -234,6 +256,7 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
             camera_pitch: args.camera_pitch.start().to_radians()..=args.camera_pitch.end().to_radians(),
             camera_roll: -args.max_camera_roll.to_radians()..=args.max_camera_roll.to_radians(),
             asymmetric_surroundings: matches!(args.surroundings, SurroundingsArg::Asymmetric),
+            penalty_return: matches!(args.poses, PosesArg::PenaltyReturn),
             ..Randomisation::default()
         },
         supersample: args.supersample,
@@ -299,8 +322,16 @@ fn replay(args: ReplayArgs) -> anyhow::Result<()> {
     let field = FieldModel::new(contract.field.clone());
     let relocaliser = Relocaliser::new(model);
     let stdout = std::io::stdout();
-    let summary = relocd::replay::replay(&recording, &relocaliser, args.burst.into(), &mut stdout.lock())
-        .context("writing results")?;
+    let summary = relocd::replay::replay(
+        &recording,
+        &relocaliser,
+        &ReplayOptions {
+            burst: args.burst.into(),
+            prior: args.prior.map(|PriorArg::PenaltyReturn| PlacementPrior::penalty_return()),
+        },
+        &mut stdout.lock(),
+    )
+    .context("writing results")?;
     #[cfg(feature = "report")]
     if let Some(directory) = &args.report {
         let written =

@@ -9,7 +9,9 @@ use tracing::warn;
 use crate::eval::{BurstEvaluation, Evaluation, Metrics, Sample};
 use crate::geometry::FieldPose;
 use crate::recording::{FrameRecord, Recording};
-use crate::relocaliser::{BurstEstimate, PoseSigma, Relocalisation, Relocaliser, Timings, fuse};
+use crate::relocaliser::{
+    BurstEstimate, PlacementPrior, PoseSigma, Relocalisation, Relocaliser, Timings, fuse,
+};
 
 /// A pose on the wire: metres and radians.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
@@ -184,19 +186,30 @@ pub struct ReplaySummary {
     pub evaluations: Vec<Evaluation>,
 }
 
-/// Relocalises every frame of `recording`, writing one JSON line per frame to `out`; with `burst` > 1,
-/// every `burst` consecutive frames (a standing robot) are also fused and written as one more line. A
-/// frame that fails is reported and skipped; only a failing `out` stops the replay.
+/// How a replay treats consecutive frames.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ReplayOptions {
+    /// Frames per standing robot; above 1, every `burst` consecutive frames are fused.
+    pub burst: usize,
+    /// A game-context prior applied to every fused burst (bursts of one frame when `burst` is 1).
+    pub prior: Option<PlacementPrior>,
+}
+
+/// Relocalises every frame of `recording`, writing one JSON line per frame to `out`; with bursts or a
+/// prior, every burst of consecutive frames (a standing robot) is also fused, re-weighted by the prior,
+/// and written as one more line. A frame that fails is reported and skipped; only a failing `out` stops
+/// the replay.
 pub fn replay(
     recording: &Recording,
     relocaliser: &Relocaliser,
-    burst: usize,
+    options: &ReplayOptions,
     out: &mut impl Write,
 ) -> std::io::Result<ReplaySummary> {
+    let burst = options.burst.max(1);
     let mut evaluations = Vec::new();
     let mut burst_evaluations = Vec::new();
     let mut failed = 0;
-    for group in recording.records().chunks(burst.max(1)) {
+    for group in recording.records().chunks(burst) {
         let mut predictions = Vec::with_capacity(group.len());
         for record in group {
             let head_yaw = record.camera.map_or(0.0, |camera| camera.head_yaw());
@@ -222,8 +235,11 @@ pub fn replay(
             };
             write_line(out, &report)?;
         }
-        if burst > 1 {
-            let estimate = fuse(&predictions);
+        if burst > 1 || options.prior.is_some() {
+            let mut estimate = fuse(&predictions);
+            if let (Ok(estimate), Some(prior)) = (&mut estimate, &options.prior) {
+                prior.apply(&mut estimate.hypotheses);
+            }
             if let (Ok(estimate), Some(truth)) = (&estimate, group[0].pose) {
                 burst_evaluations.push(BurstEvaluation::new(&truth, estimate));
             }

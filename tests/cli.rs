@@ -174,6 +174,44 @@ fn replay_fuses_rendered_bursts_of_a_standing_robot() {
 }
 
 #[test]
+fn the_penalty_prior_picks_the_own_half_for_robots_put_back_after_a_penalty() {
+    let dir = tempfile::tempdir().unwrap();
+    let recording = dir.path().join("returns");
+    let rendered = relocd(&[
+        "render",
+        "--out",
+        recording.to_str().unwrap(),
+        "--count",
+        "4",
+        "--seed",
+        "6000",
+        "--width",
+        "160",
+        "--height",
+        "120",
+        "--poses",
+        "penalty-return",
+    ]);
+    assert!(rendered.status.success(), "{}", stderr(&rendered));
+    let output = relocd(&["replay", recording.to_str().unwrap(), "--prior", "penalty-return"]);
+    assert!(output.status.success(), "{}", stderr(&output));
+    let bursts: Vec<serde_json::Value> = stdout(&output)
+        .lines()
+        .map(|line| serde_json::from_str::<serde_json::Value>(line).unwrap())
+        .filter(|line| line.get("burst").is_some())
+        .collect();
+    assert_eq!(bursts.len(), 4, "a burst of one per frame");
+    for burst in &bursts {
+        let truth = &burst["truth"];
+        assert!(truth["x"].as_f64().unwrap() < -2.0, "{truth}");
+        // The prior re-weights the symmetric pair: the heaviest hypothesis is the own-half twin.
+        let heaviest = &burst["hypotheses"][0];
+        assert!(heaviest["x"].as_f64().unwrap() < 0.0, "{burst}");
+        assert!(heaviest["weight"].as_f64().unwrap() > 0.9, "{burst}");
+    }
+}
+
+#[test]
 fn replay_reports_a_bad_frame_and_goes_on() {
     let dir = tempfile::tempdir().unwrap();
     let model = Path::new(env!("CARGO_MANIFEST_DIR")).join("models/fixtures/tiny/valid.onnx");

@@ -2,7 +2,7 @@
 //! and a randomised scene (light, carpet tone, robots, ball, sensor noise). Deterministic: the same
 //! seed and frame index always give the same frame, whatever the thread count.
 
-use std::f64::consts::PI;
+use std::f64::consts::{FRAC_PI_2, PI};
 use std::ops::RangeInclusive;
 
 use nalgebra::{Point2, Vector3};
@@ -66,6 +66,9 @@ pub struct Randomisation {
     pub noise_sigma: RangeInclusive<f64>,
     /// Black or asymmetric surroundings (the asymmetric hall gets a per-frame seed).
     pub asymmetric_surroundings: bool,
+    /// Poses where the rules put a robot back after a penalty (x = −3.2 ± 0.5 m, |y| = 3.35–3.65 m,
+    /// facing the field ± 15°) instead of uniform over the carpet.
+    pub penalty_return: bool,
 }
 
 impl Default for Randomisation {
@@ -88,6 +91,7 @@ impl Default for Randomisation {
             net_probability: 0.5,
             noise_sigma: 0.5..=5.0,
             asymmetric_surroundings: false,
+            penalty_return: false,
         }
     }
 }
@@ -111,11 +115,22 @@ impl Randomisation {
         let mut rng = ChaCha8Rng::seed_from_u64(mix_bits(seed) ^ mix_bits(index.wrapping_add(0x5eed)));
         let dimensions = field.dimensions();
         let (half_length, half_width) = (dimensions.carpet_half_length(), dimensions.carpet_half_width());
-        let pose = FieldPose::new(
+        let (u, v, w) = (
             rng.random_range(-half_length..=half_length),
             rng.random_range(-half_width..=half_width),
             rng.random_range(-PI..PI),
-        )
+        );
+        let pose = if self.penalty_return {
+            // The same draws, mapped onto the placement beside either touchline in the own half.
+            let side = if v < 0.0 { -1.0 } else { 1.0 };
+            FieldPose::new(
+                -3.2 + 0.5 * u / half_length,
+                side * (3.35 + 0.3 * v.abs() / half_width),
+                -side * FRAC_PI_2 + 15f64.to_radians() * w / PI,
+            )
+        } else {
+            FieldPose::new(u, v, w)
+        }
         .expect("sampled pose is finite");
         let head_yaw = if self.max_head_yaw > 0.0 {
             rng.random_range(-self.max_head_yaw..=self.max_head_yaw)
@@ -258,6 +273,25 @@ mod tests {
         assert!((later.camera.pitch() - first.camera.pitch()).abs() <= 1f64.to_radians() + 1e-12);
         assert_ne!(later.settings.noise_seed, first.settings.noise_seed);
         assert_eq!(later, randomisation.sample_in_burst(&field, 3, 7, 2, 1));
+    }
+
+    #[test]
+    fn penalty_return_poses_stand_beside_a_touchline_facing_the_field() {
+        let field = FieldModel::default();
+        let randomisation = Randomisation { penalty_return: true, ..Randomisation::default() };
+        let mut sides = [0, 0];
+        for index in 0..100 {
+            let pose = randomisation.sample(&field, 4, index, 1).pose;
+            assert!((-3.7..=-2.7).contains(&pose.x()), "{pose:?}");
+            assert!(
+                (3.35..=3.65).contains(&pose.y().abs()) && field.is_on_carpet(pose.position()),
+                "{pose:?}"
+            );
+            let facing = -pose.y().signum() * FRAC_PI_2;
+            assert!((pose.heading() - facing).abs() <= 15f64.to_radians() + 1e-9, "{pose:?}");
+            sides[usize::from(pose.y() > 0.0)] += 1;
+        }
+        assert!(sides[0] > 20 && sides[1] > 20, "both touchlines: {sides:?}");
     }
 
     #[test]
