@@ -318,8 +318,6 @@ fn replay(args: ReplayArgs) -> anyhow::Result<()> {
         frames = recording.records().len(),
         "replaying"
     );
-    #[cfg(feature = "report")]
-    let field = FieldModel::new(contract.field.clone());
     let relocaliser = Relocaliser::new(model);
     let stdout = std::io::stdout();
     let summary = relocd::replay::replay(
@@ -334,6 +332,7 @@ fn replay(args: ReplayArgs) -> anyhow::Result<()> {
     .context("writing results")?;
     #[cfg(feature = "report")]
     if let Some(directory) = &args.report {
+        let field = FieldModel::new(relocaliser.model().contract().field.clone());
         let written =
             relocd::report::write_report(directory, &summary.evaluations, &field).context("--report")?;
         info!(plots = ?written, "report written");

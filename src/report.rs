@@ -11,7 +11,7 @@ use plotters::prelude::*;
 use plotters::style::FontStyle;
 use thiserror::Error;
 
-use crate::eval::Evaluation;
+use crate::eval::{Evaluation, median};
 use crate::geometry::{FieldModel, FieldPose};
 
 /// Font family name the labels use.
@@ -115,10 +115,9 @@ fn draw_error_scatter(area: &Area, evaluations: &[Evaluation]) -> DrawResult {
         let point = ((100.0 * e.best_of_set.0).min(x_max), e.best_of_set.1);
         Circle::new(point, 2, BLUE.mix(0.35).filled())
     }))?;
-    let median_location = locations[locations.len() / 2];
-    let mut headings: Vec<f64> = evaluations.iter().map(|e| e.best_of_set.1).collect();
-    headings.sort_by(f64::total_cmp);
-    let median_heading = headings[headings.len() / 2];
+    let median_location = median(&locations);
+    let headings: Vec<f64> = evaluations.iter().map(|e| e.best_of_set.1).collect();
+    let median_heading = median(&headings);
     chart
         .draw_series(LineSeries::new(
             [(median_location, 0.0), (median_location, 180.0)],

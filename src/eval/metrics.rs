@@ -3,7 +3,7 @@
 use serde::Serialize;
 
 use crate::geometry::angle::angle_distance;
-use crate::geometry::{FieldPose, FoldClass, Hypothesis, Representation};
+use crate::geometry::{FieldPose, FoldClass, Representation};
 use crate::relocaliser::{BurstEstimate, Prediction};
 
 /// One evaluated frame: the truth and what the model said.
@@ -53,18 +53,12 @@ impl Sample {
             angle_distance(folded.heading(), folded_truth.heading()).to_degrees(),
         );
         let hypotheses = self.prediction.hypotheses();
-        let error = |hypothesis: &Hypothesis| {
-            (
-                hypothesis.pose.distance_to(&self.truth),
-                angle_distance(hypothesis.pose.heading(), self.truth.heading()).to_degrees(),
-            )
-        };
-        let modelled = error(&hypotheses[0]);
+        let modelled = pose_error(&hypotheses[0].pose, &self.truth);
         let closest = hypotheses
             .iter()
             .min_by(|a, b| a.pose.distance_to(&self.truth).total_cmp(&b.pose.distance_to(&self.truth)))
             .expect("at least one hypothesis");
-        let best_of_set = error(closest);
+        let best_of_set = pose_error(&closest.pose, &self.truth);
         let bits = representation.fold_bits();
         let fold_error = (bits > 0).then(|| {
             let FoldClass(class_bits) = class;
@@ -95,6 +89,11 @@ impl Sample {
     }
 }
 
+/// Location (metres) and heading (degrees) error of `pose` against `truth`.
+fn pose_error(pose: &FieldPose, truth: &FieldPose) -> (f64, f64) {
+    (pose.distance_to(truth), angle_distance(pose.heading(), truth.heading()).to_degrees())
+}
+
 /// One evaluated burst: the fused hypotheses against the true pose of the standing robot.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct BurstEvaluation {
@@ -109,13 +108,8 @@ pub struct BurstEvaluation {
 impl BurstEvaluation {
     /// Scores a fused burst against the robot's true pose.
     pub fn new(truth: &FieldPose, estimate: &BurstEstimate) -> Self {
-        let errors: Vec<(f64, f64)> = estimate
-            .hypotheses
-            .iter()
-            .map(|h| {
-                (h.pose.distance_to(truth), angle_distance(h.pose.heading(), truth.heading()).to_degrees())
-            })
-            .collect();
+        let errors: Vec<(f64, f64)> =
+            estimate.hypotheses.iter().map(|hypothesis| pose_error(&hypothesis.pose, truth)).collect();
         let heaviest = &estimate.hypotheses[0];
         Self {
             modelled: errors[0],
@@ -321,7 +315,8 @@ fn mean(values: &[f64]) -> f64 {
     values.iter().sum::<f64>() / values.len().max(1) as f64
 }
 
-fn median(values: &[f64]) -> f64 {
+/// The median; for an even count, the mean of the two middle values (NaN if empty).
+pub(crate) fn median(values: &[f64]) -> f64 {
     if values.is_empty() {
         return f64::NAN;
     }

@@ -4,4 +4,6 @@
 
 mod metrics;
 
+#[cfg(feature = "report")]
+pub(crate) use metrics::median;
 pub use metrics::{BurstEvaluation, BurstMetrics, Coverage, ErrorStats, Evaluation, Metrics, Sample};

@@ -43,12 +43,12 @@ pub fn render_dataset(
     let mut writer = RecordingWriter::create(out)?;
     let digits = spec.count.saturating_sub(1).to_string().len().max(6);
     let batch = (rayon::current_num_threads() * 4) as u64;
+    let burst = spec.burst.max(1);
     for start in (0..spec.count).step_by(batch as usize) {
         let end = (start + batch).min(spec.count);
         let records: Vec<FrameRecord> = (start..end)
             .into_par_iter()
             .map(|index| {
-                let burst = spec.burst.max(1);
                 let frame = spec.randomisation.sample_in_burst(
                     &spec.field,
                     spec.seed,

@@ -132,11 +132,7 @@ impl Randomisation {
             FieldPose::new(u, v, w)
         }
         .expect("sampled pose is finite");
-        let head_yaw = if self.max_head_yaw > 0.0 {
-            rng.random_range(-self.max_head_yaw..=self.max_head_yaw)
-        } else {
-            0.0
-        };
+        let head_yaw = self.draw_head_yaw(&mut rng);
         let camera = CameraPose::new(
             rng.random_range(self.camera_height.clone()),
             rng.random_range(self.camera_pitch.clone()),
@@ -208,6 +204,11 @@ impl Randomisation {
         SampledFrame { pose, camera, scene, settings }
     }
 
+    /// A head yaw uniform in ±`max_head_yaw`, or 0 (drawing nothing) when the head does not turn.
+    fn draw_head_yaw(&self, rng: &mut ChaCha8Rng) -> f64 {
+        if self.max_head_yaw > 0.0 { rng.random_range(-self.max_head_yaw..=self.max_head_yaw) } else { 0.0 }
+    }
+
     /// Draws frame `frame` of burst `burst` of the sequence `seed`: a robot standing still, so the pose
     /// and scene of frame 0 (which equals `sample(field, seed, burst, …)`) with the camera swaying by up
     /// to a degree in pitch and roll, a fresh head yaw where the head may turn, and fresh sensor noise.
@@ -230,11 +231,7 @@ impl Randomisation {
         let limit = 89.9f64.to_radians();
         let swayed =
             |angle: f64, rng: &mut ChaCha8Rng| (angle + rng.random_range(-sway..=sway)).clamp(-limit, limit);
-        let head_yaw = if self.max_head_yaw > 0.0 {
-            rng.random_range(-self.max_head_yaw..=self.max_head_yaw)
-        } else {
-            0.0
-        };
+        let head_yaw = self.draw_head_yaw(&mut rng);
         let camera = CameraPose::new(
             still.camera.height(),
             swayed(still.camera.pitch(), &mut rng),
