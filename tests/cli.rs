@@ -71,8 +71,10 @@ fn bad_render_arguments_are_rejected_with_a_reason() {
     let odd = relocd(&["render", "--out", out.to_str().unwrap(), "--width", "63"]);
     assert!(!odd.status.success());
     assert!(stderr(&odd).contains("the width must be even"), "{}", stderr(&odd));
-    let cases: [(&[&str], &str); 6] = [
+    let cases: [(&[&str], &str); 8] = [
         (&["--camera-pitch", "20,10"], "MIN 20 is greater than MAX 10"),
+        (&["--burst", "0"], "--burst"),
+        (&["--poses", "anywhere"], "--poses"),
         (&["--camera-height", "0.5"], "expected MIN,MAX"),
         (&["--horizontal-fov", "0"], "--horizontal-fov 0"),
         (&["--ball-probability", "1.5"], "--ball-probability 1.5"),
@@ -254,4 +256,28 @@ fn replay_with_a_missing_model_or_recording_says_which() {
     let output = relocd(&["replay", "/nonexistent/recording"]);
     assert!(!output.status.success());
     assert!(stderr(&output).contains("opening recording /nonexistent/recording"), "{}", stderr(&output));
+}
+
+#[test]
+fn bad_replay_options_are_rejected_with_a_reason() {
+    for (args, expected) in [
+        (&["replay", "--burst", "0"][..], "--burst"),
+        (&["replay", "--burst", "65"][..], "--burst"),
+        (&["replay", "--prior", "kick-off"][..], "--prior"),
+    ] {
+        let output = relocd(args);
+        assert!(!output.status.success(), "{args:?} should fail");
+        assert!(stderr(&output).contains(expected), "{args:?}: {}", stderr(&output));
+    }
+    // Plots need true poses: a recording without them gets the reason, not an empty report.
+    let dir = tempfile::tempdir().unwrap();
+    let recording = dir.path().join("no-poses");
+    std::fs::create_dir(&recording).unwrap();
+    let sample = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/sample");
+    std::fs::copy(sample.join("000000.jpg"), recording.join("000000.jpg")).unwrap();
+    std::fs::write(recording.join("frames.jsonl"), "{\"file\": \"000000.jpg\", \"t\": 0.0}\n").unwrap();
+    let report = dir.path().join("report");
+    let output = relocd(&["replay", recording.to_str().unwrap(), "--report", report.to_str().unwrap()]);
+    assert!(!output.status.success());
+    assert!(stderr(&output).contains("no frames with a true pose to plot"), "{}", stderr(&output));
 }
