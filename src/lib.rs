@@ -3,12 +3,11 @@
 //! The library is the pure core (geometry, symmetries, renderer, recording format); the binary
 //! `relocd` is the command line on top of it.
 
-pub mod control;
 pub mod eval;
 pub mod frame;
-pub mod gamecontroller;
 pub mod geometry;
 pub mod posture;
+pub mod protocol;
 pub mod recording;
 pub mod relocaliser;
 pub mod replay;

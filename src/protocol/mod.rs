@@ -1,0 +1,5 @@
+//! Wire formats as pure encode/decode: each decoder validates every field and names what is wrong.
+
+pub mod control;
+pub mod gamecontroller;
+pub mod lola;
