@@ -1,5 +1,7 @@
 //! Wire formats as pure encode/decode: each decoder validates every field and names what is wrong.
 
 pub mod control;
+pub mod frame_header;
 pub mod gamecontroller;
 pub mod lola;
+pub mod message;
