@@ -11,7 +11,9 @@ use clap::{Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use tracing::info;
 
-use relocd::geometry::{CameraIntrinsics, FieldDimensions, FieldModel};
+use relocd::daemon::config::{Config, Listen, SensorInput, SourceSpec, Target};
+use relocd::geometry::{CameraIntrinsics, FieldDimensions, FieldModel, Representation};
+use relocd::protocol::message::Encoding;
 use relocd::recording::{FrameFormat, Recording};
 use relocd::relocaliser::{self, Model, PlacementPrior, Relocaliser};
 use relocd::replay::ReplayOptions;
@@ -21,9 +23,10 @@ use relocd::sim::{DatasetSpec, Randomisation, render_dataset};
 #[derive(Debug, Parser)]
 #[command(name = "relocd", version, about, long_about = None)]
 struct Cli {
-    /// Log level or filter for messages on stderr (error, warn, info, debug, trace).
-    #[arg(long, global = true, default_value = "info", env = "RELOCD_LOG")]
-    log_level: String,
+    /// Log level or filter for messages on stderr (error, warn, info, debug, trace) [default: info,
+    /// or the config's `log_level` for `run`].
+    #[arg(long, global = true, env = "RELOCD_LOG")]
+    log_level: Option<String>,
 
     #[command(subcommand)]
     command: Command,
@@ -38,6 +41,52 @@ enum Command {
     Replay(ReplayArgs),
     /// Print the field description relocd uses (TOML, metres); edit a copy for another field.
     Field(FieldArgs),
+    /// Run the daemon: relocalise on a penalty return, a fall, a pick-up or a request, and publish the
+    /// hypotheses. Flags override the config file's keys.
+    Run(RunArgs),
+}
+
+#[derive(Debug, clap::Args)]
+struct RunArgs {
+    /// TOML config (see deploy/relocd.toml); without it, every key has its Nao default.
+    #[arg(long, short)]
+    config: Option<PathBuf>,
+    /// Frame source: v4l:DEVICE, frames:unix:PATH, replay:DIR or sim.
+    #[arg(long)]
+    source: Option<SourceSpec>,
+    /// ONNX model file [default: the built-in model].
+    #[arg(long)]
+    model: Option<PathBuf>,
+    /// Decode the model's outputs in this representation instead of its contract's.
+    #[arg(long)]
+    representation: Option<Representation>,
+    /// Our team number (turns the GameController trigger on, with --player).
+    #[arg(long)]
+    team: Option<u8>,
+    /// Our player number, 1-20.
+    #[arg(long)]
+    player: Option<u8>,
+    /// GameController UDP port.
+    #[arg(long)]
+    gc_port: Option<u16>,
+    /// Sensor input: unix:PATH, udp:IP:PORT, lola:PATH or off.
+    #[arg(long)]
+    sensors: Option<SensorInput>,
+    /// Control socket: unix:PATH, udp:IP:PORT or off.
+    #[arg(long)]
+    control: Option<Listen>,
+    /// Publish target, udp:IP:PORT or unix:PATH; repeat for several (replaces the config's list).
+    #[arg(long)]
+    publish: Vec<Target>,
+    /// Message encoding: json or msgpack.
+    #[arg(long)]
+    encoding: Option<Encoding>,
+    /// Frames per burst.
+    #[arg(long)]
+    burst: Option<usize>,
+    /// Head yaw assumed when the trigger and frame give none, degrees.
+    #[arg(long, allow_negative_numbers = true)]
+    head_yaw: Option<f64>,
 }
 
 #[derive(Debug, clap::Args)]
@@ -170,14 +219,17 @@ enum FormatArg {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    if let Err(error) = init_logging(&cli.log_level) {
-        eprintln!("error: {error:#}");
-        return ExitCode::from(2);
-    }
     let result = match cli.command {
-        Command::Render(args) => render(args),
-        Command::Replay(args) => replay(args),
-        Command::Field(args) => field(args),
+        Command::Run(args) => run(args, cli.log_level),
+        command => match init_logging(cli.log_level.as_deref().unwrap_or("info")) {
+            Ok(()) => match command {
+                Command::Render(args) => render(args),
+                Command::Replay(args) => replay(args),
+                Command::Field(args) => field(args),
+                Command::Run(_) => unreachable!("handled above"),
+            },
+            Err(error) => Err(error),
+        },
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -197,6 +249,32 @@ fn init_logging(filter: &str) -> anyhow::Result<()> {
         .with_ansi(std::io::stderr().is_terminal())
         .init();
     Ok(())
+}
+
+fn run(args: RunArgs, log_level: Option<String>) -> anyhow::Result<()> {
+    let mut config = match &args.config {
+        Some(path) => Config::load(path)?,
+        None => Config::default(),
+    };
+    let RunArgs { source, model, representation, team, player, gc_port, sensors, control, .. } = args;
+    config.source = source.unwrap_or(config.source);
+    config.model = model.or(config.model);
+    config.representation = representation.or(config.representation);
+    config.team = team.or(config.team);
+    config.player = player.or(config.player);
+    config.gamecontroller.port = gc_port.unwrap_or(config.gamecontroller.port);
+    config.sensors = sensors.unwrap_or(config.sensors);
+    config.control = control.unwrap_or(config.control);
+    config.publish.encoding = args.encoding.unwrap_or(config.publish.encoding);
+    config.burst.frames = args.burst.unwrap_or(config.burst.frames);
+    config.camera.head_yaw_deg = args.head_yaw.unwrap_or(config.camera.head_yaw_deg);
+    config.log_level = log_level.unwrap_or(config.log_level);
+    if !args.publish.is_empty() {
+        config.publish.targets = args.publish;
+    }
+    config.validate()?;
+    init_logging(&config.log_level)?;
+    relocd::daemon::run(config)
 }
 
 fn load_field(path: Option<&Path>) -> anyhow::Result<FieldModel> {

@@ -66,6 +66,11 @@ impl PostureDetector {
         Self { config, pending: None, unloaded_since: None, settled_since: None }
     }
 
+    /// Whether the last sample showed the robot upright, steady and on both feet.
+    pub fn is_settled(&self) -> bool {
+        self.settled_since.is_some()
+    }
+
     /// Takes the sample received at `t` seconds; returns an event once per fall or pick-up, when the
     /// robot has settled after it. A fall outranks a pick-up that happens with it.
     pub fn update(&mut self, t: f64, state: &LolaState) -> Option<PostureEvent> {

@@ -49,6 +49,12 @@ pub enum RecordingError {
         /// What is wrong with it.
         reason: String,
     },
+    /// The recording holds no frames.
+    #[error("{} holds no frames", .directory.display())]
+    Empty {
+        /// The recording directory.
+        directory: PathBuf,
+    },
     /// Writing would overwrite an existing recording.
     #[error("{0} already holds a recording: choose another directory or remove it first")]
     AlreadyExists(PathBuf),

@@ -9,6 +9,7 @@ use tract_onnx::prelude::*;
 use super::contract::{CONTRACT_KEY, ContractError, ModelContract};
 use super::decode::RawOutput;
 use super::preprocess::InputTensor;
+use crate::geometry::Representation;
 
 /// A model file that cannot be used, or a run that failed.
 #[derive(Debug, Error)]
@@ -62,13 +63,28 @@ pub struct Model {
 impl Model {
     /// Loads and checks a model file.
     pub fn load(path: &Path) -> Result<Self, ModelError> {
+        Self::load_as(path, None)
+    }
+
+    /// Loads a model file, decoding in `representation` when given (see [`Model::from_bytes_as`]).
+    pub fn load_as(path: &Path, representation: Option<Representation>) -> Result<Self, ModelError> {
         let bytes = std::fs::read(path)
             .map_err(|source| ModelError::Read { path: path.display().to_string(), source })?;
-        Self::from_bytes(&bytes, &path.display().to_string())
+        Self::from_bytes_as(&bytes, &path.display().to_string(), representation)
     }
 
     /// Loads and checks a model from memory; `source_name` names it in errors.
     pub fn from_bytes(bytes: &[u8], source_name: &str) -> Result<Self, ModelError> {
+        Self::from_bytes_as(bytes, source_name, None)
+    }
+
+    /// Like [`Model::from_bytes`], but decodes the outputs in `representation` instead of the one
+    /// the contract names (the graph must then have that representation's outputs).
+    pub fn from_bytes_as(
+        bytes: &[u8],
+        source_name: &str,
+        representation: Option<Representation>,
+    ) -> Result<Self, ModelError> {
         let source_name = source_name.to_string();
         let graph_error = |reason: String| ModelError::Graph { source_name: source_name.clone(), reason };
         if bytes.is_empty() {
@@ -91,8 +107,11 @@ impl Model {
                 source_name: source_name.clone(),
                 error: ContractError::Missing,
             })?;
-        let contract = ModelContract::from_json(&contract_text)
+        let mut contract = ModelContract::from_json(&contract_text)
             .map_err(|error| ModelError::Contract { source_name: source_name.clone(), error })?;
+        if let Some(representation) = representation {
+            contract.representation = representation;
+        }
 
         let model = onnx.model_for_proto_model(&proto).map_err(|error| graph_error(format!("{error:#}")))?;
         let inputs = model.input_outlets().map_err(|error| graph_error(format!("{error:#}")))?;

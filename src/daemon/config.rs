@@ -1,0 +1,573 @@
+//! The daemon's configuration: a TOML file in which every key is optional and defaults to what a Nao
+//! needs; `relocd run` flags override single keys. `deploy/relocd.toml` lists every key.
+
+use std::fmt;
+use std::net::{IpAddr, Ipv4Addr, SocketAddr};
+use std::path::{Path, PathBuf};
+use std::str::FromStr;
+
+use serde::Deserialize;
+use thiserror::Error;
+
+use crate::geometry::Representation;
+use crate::protocol::message::Encoding;
+
+/// A configuration that cannot be used.
+#[derive(Debug, Error)]
+pub enum ConfigError {
+    /// The file could not be read.
+    #[error("cannot read config {path}: {source}")]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// TOML syntax, an unknown key, or a value of the wrong kind (the message names the key).
+    #[error("config {path}: {message}")]
+    Parse {
+        /// The file.
+        path: PathBuf,
+        /// The TOML decoder's message.
+        message: String,
+    },
+    /// A value out of range.
+    #[error("config key `{key}`: {reason}")]
+    Invalid {
+        /// The key, dotted.
+        key: &'static str,
+        /// What is wrong.
+        reason: String,
+    },
+}
+
+/// Everything `relocd run` needs.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Config {
+    /// Log level or filter (error, warn, info, debug, trace).
+    pub log_level: String,
+    /// Where frames come from.
+    pub source: SourceSpec,
+    /// ONNX model file; absent: the model built into the binary.
+    pub model: Option<PathBuf>,
+    /// Decode the model's outputs in this representation instead of the one its contract names.
+    pub representation: Option<Representation>,
+    /// Our team number, as the GameController knows it; absent: the penalty trigger is off.
+    pub team: Option<u8>,
+    /// Our player number (1–20); absent: the penalty trigger is off.
+    pub player: Option<u8>,
+    /// GameController input.
+    pub gamecontroller: GameControllerConfig,
+    /// LoLA sensor input for fall and pick-up detection.
+    pub sensors: SensorInput,
+    /// The control socket: relocalise requests and status.
+    pub control: Listen,
+    /// Where hypotheses go.
+    pub publish: PublishConfig,
+    /// Burst size and timing.
+    pub burst: BurstConfig,
+    /// The camera: V4L2 settings and the head yaw assumed when nothing else gives one.
+    pub camera: CameraConfig,
+    /// The forwarded-frame socket (source `frames:unix:PATH`).
+    pub frames: FramesConfig,
+    /// The replay source (source `replay:DIR`).
+    pub replay: ReplayConfig,
+    /// The simulated source (source `sim`).
+    pub sim: SimConfig,
+    /// Scheduling.
+    pub process: ProcessConfig,
+}
+
+impl Default for Config {
+    fn default() -> Self {
+        Self {
+            log_level: "info".into(),
+            source: SourceSpec::V4l(PathBuf::from("/dev/video-top")),
+            model: None,
+            representation: None,
+            team: None,
+            player: None,
+            gamecontroller: GameControllerConfig::default(),
+            sensors: SensorInput::Forwarded(Listen::Unix(PathBuf::from("/tmp/relocd-sensors"))),
+            control: Listen::Unix(PathBuf::from("/tmp/relocd-control")),
+            publish: PublishConfig::default(),
+            burst: BurstConfig::default(),
+            camera: CameraConfig::default(),
+            frames: FramesConfig::default(),
+            replay: ReplayConfig::default(),
+            sim: SimConfig::default(),
+            process: ProcessConfig::default(),
+        }
+    }
+}
+
+impl Config {
+    /// Reads and checks a config file.
+    pub fn load(path: &Path) -> Result<Self, ConfigError> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|source| ConfigError::Read { path: path.to_path_buf(), source })?;
+        let config: Self = toml::from_str(&text)
+            .map_err(|error| ConfigError::Parse { path: path.to_path_buf(), message: error.to_string() })?;
+        config.validate()?;
+        Ok(config)
+    }
+
+    /// Checks what serde cannot: ranges and combinations. Call again after overriding keys.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let invalid = |key, reason: &str| Err(ConfigError::Invalid { key, reason: reason.into() });
+        if self.player.is_some_and(|player| !(1..=20).contains(&player)) {
+            return invalid("player", "player numbers run from 1 to 20");
+        }
+        if self.team.is_some() != self.player.is_some() {
+            return invalid("team", "give both `team` and `player` for the penalty trigger, or neither");
+        }
+        if !(1..=30).contains(&self.burst.frames) {
+            return invalid("burst.frames", "a burst has 1 to 30 frames");
+        }
+        if self.burst.timeout_ms == 0 || self.burst.timeout_ms > 30_000 {
+            return invalid("burst.timeout_ms", "must lie in 1..=30000");
+        }
+        if self.publish.targets.is_empty() {
+            return invalid("publish.targets", "give at least one target, e.g. \"udp:127.0.0.1:5454\"");
+        }
+        if self.publish.targets.len() > 8 {
+            return invalid("publish.targets", "at most 8 targets");
+        }
+        if !(1..=1000).contains(&self.frames.queue) {
+            return invalid("frames.queue", "must lie in 1..=1000");
+        }
+        let (width, height) = (self.camera.width, self.camera.height);
+        if width == 0 || height == 0 || width % 2 != 0 || width > 1280 || height > 960 {
+            return invalid("camera.width", "the camera size must be even and at most 1280×960");
+        }
+        if !(1..=60).contains(&self.camera.fps) {
+            return invalid("camera.fps", "must lie in 1..=60");
+        }
+        if !self.camera.head_yaw_deg.is_finite() || self.camera.head_yaw_deg.abs() > 120.0 {
+            return invalid("camera.head_yaw_deg", "must lie within ±120° (the Nao's head yaw range)");
+        }
+        if !(8..=1280).contains(&self.sim.width) || !(6..=960).contains(&self.sim.height) {
+            return invalid("sim.width", "the simulated camera is 8×6 to 1280×960");
+        }
+        if !(-20..=19).contains(&self.process.nice) {
+            return invalid("process.nice", "niceness lies in -20..=19");
+        }
+        if self.process.cpu.is_some_and(|cpu| cpu >= libc::CPU_SETSIZE as usize) {
+            return invalid("process.cpu", "no such CPU");
+        }
+        if tracing_subscriber::EnvFilter::try_new(&self.log_level).is_err() {
+            return invalid("log_level", "expected error, warn, info, debug, trace or a tracing filter");
+        }
+        Ok(())
+    }
+}
+
+/// GameController input.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct GameControllerConfig {
+    /// Listen for GameController packets at all.
+    pub enabled: bool,
+    /// Address to bind. The GameController broadcasts on the robots' network, so the default listens
+    /// on every interface; `127.0.0.1` only hears packets relayed on the robot.
+    pub address: IpAddr,
+    /// UDP port (the GameController's is 3838).
+    pub port: u16,
+}
+
+impl Default for GameControllerConfig {
+    fn default() -> Self {
+        Self { enabled: true, address: IpAddr::V4(Ipv4Addr::UNSPECIFIED), port: 3838 }
+    }
+}
+
+/// Where hypotheses go, and how they are encoded.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct PublishConfig {
+    /// Datagram targets.
+    pub targets: Vec<Target>,
+    /// Message encoding.
+    pub encoding: Encoding,
+}
+
+impl Default for PublishConfig {
+    fn default() -> Self {
+        Self {
+            targets: vec![Target::Udp(SocketAddr::from(([127, 0, 0, 1], 5454)))],
+            encoding: Encoding::Json,
+        }
+    }
+}
+
+/// Burst size and timing.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct BurstConfig {
+    /// Frames per relocalisation (5: fusing 5 frames beat single frames in the measured test bursts).
+    pub frames: usize,
+    /// Least time between two frames of a burst, milliseconds.
+    pub spacing_ms: u64,
+    /// Give up capturing after this long and use the frames taken so far, milliseconds.
+    pub timeout_ms: u64,
+    /// Least time between the starts of two bursts; triggers in between join the next burst, ms.
+    pub min_interval_ms: u64,
+    /// After a trigger, wait at most this long for the sensors to report a steady robot, ms.
+    pub settle_timeout_ms: u64,
+}
+
+impl Default for BurstConfig {
+    fn default() -> Self {
+        Self { frames: 5, spacing_ms: 100, timeout_ms: 3000, min_interval_ms: 1000, settle_timeout_ms: 2000 }
+    }
+}
+
+/// The camera.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct CameraConfig {
+    /// V4L2 capture width, pixels.
+    pub width: u32,
+    /// V4L2 capture height, pixels.
+    pub height: u32,
+    /// V4L2 frame rate.
+    pub fps: u32,
+    /// Keep the V4L2 device streaming between bursts (faster bursts, but the camera stays taken).
+    pub keep_streaming: bool,
+    /// Head yaw assumed when neither the trigger nor the frame gives one, degrees (positive: left).
+    pub head_yaw_deg: f64,
+}
+
+impl Default for CameraConfig {
+    fn default() -> Self {
+        Self { width: 640, height: 480, fps: 30, keep_streaming: false, head_yaw_deg: 0.0 }
+    }
+}
+
+/// The forwarded-frame socket.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct FramesConfig {
+    /// Frames kept; when full, the oldest is dropped.
+    pub queue: usize,
+}
+
+impl Default for FramesConfig {
+    fn default() -> Self {
+        Self { queue: 8 }
+    }
+}
+
+/// The replay source.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ReplayConfig {
+    /// Start again at the end of the recording.
+    #[serde(rename = "loop")]
+    pub looping: bool,
+}
+
+impl Default for ReplayConfig {
+    fn default() -> Self {
+        Self { looping: true }
+    }
+}
+
+/// The simulated source: the renderer along a figure-eight walk over the field.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SimConfig {
+    /// Rendered width, pixels.
+    pub width: u32,
+    /// Rendered height, pixels.
+    pub height: u32,
+    /// Seed of the randomised scenes.
+    pub seed: u64,
+}
+
+impl Default for SimConfig {
+    fn default() -> Self {
+        Self { width: 320, height: 240, seed: 1 }
+    }
+}
+
+/// Scheduling: relocd must not take CPU from the team's process.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ProcessConfig {
+    /// Niceness of the whole process (higher is kinder to others).
+    pub nice: i32,
+    /// Pin every thread to this CPU; absent: any.
+    pub cpu: Option<usize>,
+}
+
+impl Default for ProcessConfig {
+    fn default() -> Self {
+        Self { nice: 10, cpu: None }
+    }
+}
+
+/// Where frames come from: `v4l:DEVICE`, `frames:unix:PATH`, `replay:DIR` or `sim`.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(try_from = "String")]
+pub enum SourceSpec {
+    /// A V4L2 device (falls back to /dev/video0 when the default is missing).
+    V4l(PathBuf),
+    /// Frames forwarded by the team's process to this Unix stream socket.
+    Frames(PathBuf),
+    /// A recording directory, played at its timestamps.
+    Replay(PathBuf),
+    /// The renderer.
+    Sim,
+}
+
+impl FromStr for SourceSpec {
+    type Err = String;
+
+    fn from_str(text: &str) -> Result<Self, Self::Err> {
+        let expected = "expected v4l:DEVICE, frames:unix:PATH, replay:DIR or sim";
+        let path = |rest: &str| {
+            if rest.is_empty() {
+                Err(format!("{text:?} names no path: {expected}"))
+            } else {
+                Ok(PathBuf::from(rest))
+            }
+        };
+        match text.split_once(':') {
+            None if text == "sim" => Ok(Self::Sim),
+            Some(("v4l", rest)) => path(rest).map(Self::V4l),
+            Some(("frames", rest)) => match rest.strip_prefix("unix:") {
+                Some(rest) => path(rest).map(Self::Frames),
+                None => Err(format!("{text:?}: forwarded frames come over a Unix socket, frames:unix:PATH")),
+            },
+            Some(("replay", rest)) => path(rest).map(Self::Replay),
+            _ => Err(format!("unknown frame source {text:?}: {expected}")),
+        }
+    }
+}
+
+impl TryFrom<String> for SourceSpec {
+    type Error = String;
+
+    fn try_from(text: String) -> Result<Self, Self::Error> {
+        text.parse()
+    }
+}
+
+impl fmt::Display for SourceSpec {
+    fn fmt(&self, formatter: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::V4l(path) => write!(formatter, "v4l:{}", path.display()),
+            Self::Frames(path) => write!(formatter, "frames:unix:{}", path.display()),
+            Self::Replay(path) => write!(formatter, "replay:{}", path.display()),
+            Self::Sim => formatter.write_str("sim"),
+        }
+    }
+}
+
+/// A datagram socket relocd binds to listen: `udp:IP:PORT`, `unix:PATH`, or `off`.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(try_from = "String")]
+pub enum Listen {
+    /// Not listening.
+    Off,
+    /// A UDP socket; relocd resolves no host names, so the address is numeric.
+    Udp(SocketAddr),
+    /// A Unix datagram socket, created with owner/group-only permissions.
+    Unix(PathBuf),
+}
+
+impl FromStr for Listen {
+    type Err = String;
+
+    fn from_str(text: &str) -> Result<Self, Self::Err> {
+        if text == "off" {
+            return Ok(Self::Off);
+        }
+        match Target::from_str(text)? {
+            Target::Udp(address) => Ok(Self::Udp(address)),
+            Target::Unix(path) => Ok(Self::Unix(path)),
+        }
+    }
+}
+
+impl TryFrom<String> for Listen {
+    type Error = String;
+
+    fn try_from(text: String) -> Result<Self, Self::Error> {
+        text.parse()
+    }
+}
+
+impl fmt::Display for Listen {
+    fn fmt(&self, formatter: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Off => formatter.write_str("off"),
+            Self::Udp(address) => write!(formatter, "udp:{address}"),
+            Self::Unix(path) => write!(formatter, "unix:{}", path.display()),
+        }
+    }
+}
+
+/// Sensor input: datagrams the team's process forwards (`udp:`/`unix:`, one LoLA state message
+/// each), LoLA's own stream socket when relocd is its only client (`lola:/tmp/robocup`), or `off`.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(try_from = "String")]
+pub enum SensorInput {
+    /// Forwarded datagrams.
+    Forwarded(Listen),
+    /// LoLA's Unix stream socket, read as a client.
+    Lola(PathBuf),
+}
+
+impl FromStr for SensorInput {
+    type Err = String;
+
+    fn from_str(text: &str) -> Result<Self, Self::Err> {
+        match text.strip_prefix("lola:") {
+            Some("") => Err("lola: needs LoLA's socket path, e.g. lola:/tmp/robocup".into()),
+            Some(path) => Ok(Self::Lola(PathBuf::from(path))),
+            None => text.parse().map(Self::Forwarded),
+        }
+    }
+}
+
+impl TryFrom<String> for SensorInput {
+    type Error = String;
+
+    fn try_from(text: String) -> Result<Self, Self::Error> {
+        text.parse()
+    }
+}
+
+impl fmt::Display for SensorInput {
+    fn fmt(&self, formatter: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Forwarded(listen) => listen.fmt(formatter),
+            Self::Lola(path) => write!(formatter, "lola:{}", path.display()),
+        }
+    }
+}
+
+/// A publish target: `udp:IP:PORT` or `unix:PATH` (a Unix datagram socket the receiver bound).
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(try_from = "String")]
+pub enum Target {
+    /// A UDP address (numeric: relocd resolves no host names).
+    Udp(SocketAddr),
+    /// A Unix datagram socket path.
+    Unix(PathBuf),
+}
+
+impl FromStr for Target {
+    type Err = String;
+
+    fn from_str(text: &str) -> Result<Self, Self::Err> {
+        match text.split_once(':') {
+            Some(("udp", address)) => address.parse().map(Self::Udp).map_err(|_| {
+                format!("{text:?}: expected udp:IP:PORT with a numeric address, e.g. udp:127.0.0.1:5454")
+            }),
+            Some(("unix", "")) => Err(format!("{text:?} names no socket path")),
+            Some(("unix", path)) => Ok(Self::Unix(PathBuf::from(path))),
+            _ => Err(format!("{text:?}: expected udp:IP:PORT or unix:PATH")),
+        }
+    }
+}
+
+impl TryFrom<String> for Target {
+    type Error = String;
+
+    fn try_from(text: String) -> Result<Self, Self::Error> {
+        text.parse()
+    }
+}
+
+impl fmt::Display for Target {
+    fn fmt(&self, formatter: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Udp(address) => write!(formatter, "udp:{address}"),
+            Self::Unix(path) => write!(formatter, "unix:{}", path.display()),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str) -> Result<Config, ConfigError> {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("relocd.toml");
+        std::fs::write(&path, text).unwrap();
+        Config::load(&path)
+    }
+
+    #[test]
+    fn the_shipped_config_parses_and_matches_the_defaults() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("deploy/relocd.toml");
+        let shipped = Config::load(&path).unwrap();
+        let defaults = Config { team: shipped.team, player: shipped.player, ..Config::default() };
+        assert_eq!(shipped, defaults, "deploy/relocd.toml should show the defaults");
+    }
+
+    #[test]
+    fn an_empty_file_is_the_defaults() {
+        assert_eq!(parse("").unwrap(), Config::default());
+    }
+
+    #[test]
+    fn keys_parse_into_typed_values() {
+        let config = parse(
+            r#"
+            source = "replay:/data/hall"
+            team = 5
+            player = 2
+            sensors = "lola:/tmp/robocup"
+            control = "udp:127.0.0.1:5001"
+            representation = "quarter"
+            [publish]
+            targets = ["udp:127.0.0.1:5000", "unix:/tmp/loc"]
+            encoding = "msgpack"
+            [replay]
+            loop = false
+            "#,
+        )
+        .unwrap();
+        assert_eq!(config.source, SourceSpec::Replay("/data/hall".into()));
+        assert_eq!(config.sensors, SensorInput::Lola("/tmp/robocup".into()));
+        assert_eq!(config.control, Listen::Udp("127.0.0.1:5001".parse().unwrap()));
+        assert_eq!(config.representation, Some(Representation::Quarter));
+        assert_eq!(config.publish.encoding, Encoding::Msgpack);
+        assert_eq!(config.publish.targets[1], Target::Unix("/tmp/loc".into()));
+        assert!(!config.replay.looping);
+    }
+
+    #[test]
+    fn bad_configs_name_the_key() {
+        let message = |text: &str| parse(text).unwrap_err().to_string();
+        assert!(message("sourse = \"sim\"").contains("sourse"), "{}", message("sourse = \"sim\""));
+        assert!(message("[burst]\nframez = 3").contains("framez"));
+        assert!(message("source = \"webcam\"").contains("unknown frame source"));
+        assert!(message("[publish]\ntargets = [\"udp:robot.local:5000\"]").contains("numeric"));
+        assert!(message("[burst]\nframes = 0").contains("burst.frames"));
+        assert!(message("player = 3").contains("`team`"));
+        assert!(message("team = 5\nplayer = 21").contains("`player`"));
+        assert!(message("[camera]\nfps = \"fast\"").contains("fps"));
+        assert!(message("source = ").contains("relocd.toml"));
+    }
+
+    #[test]
+    fn specs_print_as_they_parse() {
+        for text in ["v4l:/dev/video-top", "frames:unix:/tmp/f", "replay:rec", "sim"] {
+            assert_eq!(text.parse::<SourceSpec>().unwrap().to_string(), text);
+        }
+        for text in ["off", "udp:127.0.0.1:5001", "unix:/tmp/c"] {
+            assert_eq!(text.parse::<Listen>().unwrap().to_string(), text);
+        }
+        assert_eq!("lola:/tmp/robocup".parse::<SensorInput>().unwrap().to_string(), "lola:/tmp/robocup");
+        assert!("frames:/tmp/f".parse::<SourceSpec>().is_err());
+        assert!("unix:".parse::<Target>().is_err());
+        assert!("lola:".parse::<SensorInput>().is_err());
+    }
+}

@@ -1,0 +1,226 @@
+//! `relocd run`: the daemon. The only async part of relocd: a single-threaded tokio runtime runs
+//! the inputs (GameController, sensors, control socket, forwarded frames) and signals; one plain
+//! thread owns the frame source and the network and does all blocking work.
+
+pub mod config;
+pub mod publish;
+pub mod sockets;
+pub mod source;
+pub mod status;
+pub mod triggers;
+pub mod worker;
+
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use anyhow::{Context, bail};
+use tokio::signal::unix::{SignalKind, signal};
+use tracing::{info, warn};
+
+use self::config::{Config, Listen, SensorInput, SourceSpec};
+use self::publish::Publisher;
+use self::sockets::Datagram;
+use self::source::FrameSource;
+use self::source::forwarded::{ForwardedSource, FrameQueue};
+use self::status::Status;
+use self::triggers::{Steadiness, Triggers};
+use self::worker::Worker;
+use crate::geometry::FieldModel;
+use crate::posture::{PostureConfig, PostureDetector};
+use crate::protocol::gamecontroller::PenaltyWatch;
+use crate::recording::Recording;
+use crate::relocaliser::{self, Model, Relocaliser};
+
+/// Triggers waiting for the relocalisation thread before new ones are refused.
+const TRIGGER_QUEUE: usize = 64;
+
+/// Runs the daemon until SIGTERM or SIGINT.
+pub fn run(config: Config) -> anyhow::Result<()> {
+    config.validate()?;
+    apply_process_settings(&config)?;
+    let model = match &config.model {
+        Some(path) => Model::load_as(path, config.representation)?,
+        None => Model::from_bytes_as(
+            relocaliser::DEFAULT_MODEL,
+            &format!("<built-in {}>", relocaliser::DEFAULT_MODEL_NAME),
+            config.representation,
+        )?,
+    };
+    let contract = model.contract();
+    info!("model {} ({})", contract.model_id, contract.representation);
+    let status = Arc::new(Status::new(config.source.to_string(), contract.model_id.clone()));
+    let publisher = Publisher::new(config.publish.targets.clone(), config.publish.encoding)
+        .context("cannot create the publishing sockets")?;
+
+    let runtime = tokio::runtime::Builder::new_current_thread().enable_all().build()?;
+    let stop = Arc::new(AtomicBool::new(false));
+    let (triggers, receiver) = Triggers::channel(TRIGGER_QUEUE, status.clone());
+    let steadiness = Arc::new(Steadiness::default());
+
+    // Sockets are bound inside the runtime and owned by their tasks, which remove Unix socket files
+    // when the runtime drops them at shutdown.
+    let source = runtime.block_on(async {
+        let source = open_source(&config, &model, &status)?;
+        start_inputs(&config, &triggers, &steadiness, &status)?;
+        anyhow::Ok(source)
+    })?;
+    drop(triggers);
+
+    let worker = Worker {
+        relocaliser: Relocaliser::new(model),
+        source,
+        publisher,
+        burst: config.burst.clone(),
+        default_head_yaw: config.camera.head_yaw_deg.to_radians(),
+        steadiness,
+        status,
+        stop: stop.clone(),
+    };
+    let worker = std::thread::Builder::new()
+        .name("relocalise".into())
+        .spawn(move || worker.run(receiver))
+        .context("cannot start the relocalisation thread")?;
+    info!("relocd running: source {}, publishing to {}", config.source, targets(&config));
+
+    runtime.block_on(async {
+        let mut terminate = signal(SignalKind::terminate())?;
+        tokio::select! {
+            _ = terminate.recv() => info!("SIGTERM: shutting down"),
+            result = tokio::signal::ctrl_c() => { result?; info!("SIGINT: shutting down") }
+        }
+        anyhow::Ok(())
+    })?;
+    stop.store(true, Ordering::Relaxed);
+    // Dropping the runtime ends the input tasks, which closes the trigger channel.
+    drop(runtime);
+    if worker.join().is_err() {
+        bail!("the relocalisation thread panicked");
+    }
+    info!("stopped");
+    Ok(())
+}
+
+fn targets(config: &Config) -> String {
+    config.publish.targets.iter().map(ToString::to_string).collect::<Vec<_>>().join(", ")
+}
+
+/// Niceness and CPU affinity, set before any other thread starts so that every thread inherits them.
+fn apply_process_settings(config: &Config) -> anyhow::Result<()> {
+    // SAFETY: setpriority only reads its integer arguments.
+    if unsafe { libc::setpriority(libc::PRIO_PROCESS, 0, config.process.nice) } != 0 {
+        warn!("cannot set niceness {}: {}", config.process.nice, std::io::Error::last_os_error());
+    }
+    if let Some(cpu) = config.process.cpu {
+        // SAFETY: the set is a plain bit mask on the stack, sized by the type passed in.
+        let pinned = unsafe {
+            let mut set: libc::cpu_set_t = std::mem::zeroed();
+            libc::CPU_SET(cpu, &mut set);
+            libc::sched_setaffinity(0, size_of::<libc::cpu_set_t>(), &set)
+        };
+        if pinned != 0 {
+            bail!("cannot pin relocd to CPU {cpu}: {}", std::io::Error::last_os_error());
+        }
+        info!("pinned to CPU {cpu}");
+    }
+    Ok(())
+}
+
+/// The configured frame source; a forwarded-frame listener is started for `frames:`.
+fn open_source(config: &Config, model: &Model, status: &Arc<Status>) -> anyhow::Result<Box<dyn FrameSource>> {
+    Ok(match &config.source {
+        SourceSpec::Replay(directory) => {
+            let recording = Recording::open(directory)?;
+            Box::new(source::replay::ReplaySource::open(recording, config.replay.looping)?)
+        }
+        SourceSpec::Sim => {
+            let field = FieldModel::new(model.contract().field.clone());
+            Box::new(source::sim::SimSource::new(field, config.sim.width, config.sim.height, config.sim.seed))
+        }
+        SourceSpec::Frames(path) => {
+            let listener = sockets::bind_stream(path)
+                .with_context(|| format!("cannot listen for forwarded frames on {}", path.display()))?;
+            info!("forwarded frames: unix:{}", path.display());
+            let queue = Arc::new(FrameQueue::new(config.frames.queue));
+            tokio::spawn(source::forwarded::listen(listener, queue.clone(), status.clone()));
+            Box::new(ForwardedSource::new(queue))
+        }
+        SourceSpec::V4l(device) => v4l_source(config, device)?,
+    })
+}
+
+#[cfg(feature = "v4l")]
+fn v4l_source(config: &Config, device: &std::path::Path) -> anyhow::Result<Box<dyn FrameSource>> {
+    let camera = &config.camera;
+    Ok(Box::new(source::v4l::V4lSource::new(
+        device.to_path_buf(),
+        camera.width,
+        camera.height,
+        camera.fps,
+        camera.keep_streaming,
+    )))
+}
+
+#[cfg(not(feature = "v4l"))]
+fn v4l_source(_: &Config, device: &std::path::Path) -> anyhow::Result<Box<dyn FrameSource>> {
+    bail!(
+        "source v4l:{} needs a relocd built with the `v4l` feature (cargo build --features v4l, \
+         which needs libclang-dev); use replay:DIR, frames:unix:PATH or sim otherwise",
+        device.display()
+    )
+}
+
+/// Binds the trigger inputs and starts their tasks.
+fn start_inputs(
+    config: &Config,
+    triggers: &Triggers,
+    steadiness: &Arc<Steadiness>,
+    status: &Arc<Status>,
+) -> anyhow::Result<()> {
+    let gamecontroller = &config.gamecontroller;
+    match (config.team, config.player) {
+        (Some(team), Some(player)) if gamecontroller.enabled => {
+            let address = SocketAddr::new(gamecontroller.address, gamecontroller.port);
+            let socket = sockets::bind_udp(address, true)
+                .with_context(|| format!("cannot listen for the GameController on {address}"))?;
+            info!("GameController: team {team}, player {player}, on {address}");
+            let watch = PenaltyWatch::new(team, player);
+            tokio::spawn(triggers::gamecontroller(socket, watch, team, triggers.clone(), status.clone()));
+        }
+        _ => info!("GameController trigger off (give team and player to turn it on)"),
+    }
+
+    let detector = PostureDetector::new(PostureConfig::default());
+    match &config.sensors {
+        SensorInput::Forwarded(Listen::Off) => info!("sensor input off: no fall or pick-up trigger"),
+        SensorInput::Forwarded(listen) => {
+            let socket =
+                Datagram::bind(listen).with_context(|| format!("cannot listen for sensors on {listen}"))?;
+            info!("sensors: {listen}");
+            tokio::spawn(triggers::sensor_datagrams(
+                socket,
+                detector,
+                steadiness.clone(),
+                triggers.clone(),
+                status.clone(),
+            ));
+        }
+        SensorInput::Lola(path) => {
+            tokio::spawn(triggers::lola_stream(
+                path.clone(),
+                detector,
+                steadiness.clone(),
+                triggers.clone(),
+                status.clone(),
+            ));
+        }
+    }
+
+    if config.control != Listen::Off {
+        let socket = Datagram::bind(&config.control)
+            .with_context(|| format!("cannot open the control socket {}", config.control))?;
+        info!("control: {}", config.control);
+        tokio::spawn(triggers::control(socket, triggers.clone(), status.clone()));
+    }
+    Ok(())
+}

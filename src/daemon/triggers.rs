@@ -1,0 +1,326 @@
+//! The trigger inputs, one task each: GameController packets (a penalty return), LoLA sensor data
+//! (fall and pick-up, and whether the robot stands still), and the control socket (requests and
+//! status). They decode, decide, and hand a [`TriggerEvent`] to the relocalisation thread; bad input
+//! is counted and logged, never fatal.
+
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use tokio::io::AsyncReadExt;
+use tokio::net::{UdpSocket, UnixStream};
+use tokio::sync::mpsc;
+use tracing::{debug, info, warn};
+
+use super::sockets::{Datagram, MAX_DATAGRAM};
+use super::source::unix_now;
+use super::status::{GameInfo, Status};
+use crate::posture::{PostureDetector, PostureEvent};
+use crate::protocol::control::ControlRequest;
+use crate::protocol::gamecontroller::{GameControlData, PenaltyWatch};
+use crate::protocol::lola::LolaState;
+use crate::protocol::message::TriggerKind;
+
+/// Sensor data older than this says nothing about whether the robot stands still now.
+const SENSORS_FRESH: Duration = Duration::from_millis(300);
+/// LoLA's stream is dropped and re-read when this much arrives without a whole message.
+const MAX_LOLA_BUFFER: usize = 64 * 1024;
+
+/// A request to relocalise.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TriggerEvent {
+    /// Unique per run, from 1.
+    pub id: u64,
+    /// What happened.
+    pub kind: TriggerKind,
+    /// Detail for the message.
+    pub reason: Option<String>,
+    /// The head yaw the frames will be taken with, radians, if the trigger knows it.
+    pub head_yaw: Option<f64>,
+    /// When it arrived.
+    pub at: Instant,
+    /// When it arrived, Unix seconds.
+    pub t: f64,
+}
+
+/// Hands triggers to the relocalisation thread.
+#[derive(Clone, Debug)]
+pub struct Triggers {
+    sender: mpsc::Sender<TriggerEvent>,
+    next_id: Arc<AtomicU64>,
+    status: Arc<Status>,
+}
+
+impl Triggers {
+    /// A handle and the receiving end, holding at most `capacity` waiting triggers.
+    pub fn channel(capacity: usize, status: Arc<Status>) -> (Self, mpsc::Receiver<TriggerEvent>) {
+        let (sender, receiver) = mpsc::channel(capacity);
+        (Self { sender, next_id: Arc::new(AtomicU64::new(1)), status }, receiver)
+    }
+
+    /// Queues a trigger and returns its id; `None` (logged and counted) when the queue is full.
+    pub fn fire(&self, kind: TriggerKind, reason: Option<String>, head_yaw: Option<f64>) -> Option<u64> {
+        let id = self.next_id.fetch_add(1, Ordering::Relaxed);
+        self.status.count_trigger(kind);
+        let event = TriggerEvent { id, kind, reason, head_yaw, at: Instant::now(), t: unix_now() };
+        info!(
+            "trigger {id}: {kind:?}{}",
+            event.reason.as_deref().map(|r| format!(" ({r})")).unwrap_or_default()
+        );
+        match self.sender.try_send(event) {
+            Ok(()) => Some(id),
+            Err(error) => {
+                warn!("trigger {id} dropped: {error}");
+                self.status.update(|report| report.triggers_dropped += 1);
+                None
+            }
+        }
+    }
+}
+
+/// Whether the robot stands still, as the sensor task last saw it.
+#[derive(Debug, Default)]
+pub struct Steadiness(Mutex<Option<(Instant, bool)>>);
+
+impl Steadiness {
+    fn report(&self, settled: bool) {
+        *self.0.lock().unwrap_or_else(|poisoned| poisoned.into_inner()) = Some((Instant::now(), settled));
+    }
+
+    /// `Some(settled)` from fresh sensor data, `None` when there is none.
+    pub fn now(&self) -> Option<bool> {
+        let last = *self.0.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+        last.filter(|(at, _)| at.elapsed() < SENSORS_FRESH).map(|(_, settled)| settled)
+    }
+}
+
+/// Logs the first of a run of rejected inputs at `warn`, the rest at `debug`, so garbage cannot flood
+/// the log.
+#[derive(Debug, Default)]
+struct RejectLog(Option<Instant>);
+
+impl RejectLog {
+    fn log(&mut self, what: &str, error: &dyn std::fmt::Display) {
+        if self.0.is_none_or(|last| last.elapsed() > Duration::from_secs(10)) {
+            self.0 = Some(Instant::now());
+            warn!("{what} refused: {error} (more within 10 s are logged at debug level)");
+        } else {
+            debug!("{what} refused: {error}");
+        }
+    }
+}
+
+/// GameController packets: our player's return from a penalty that moved it.
+pub async fn gamecontroller(
+    socket: UdpSocket,
+    mut watch: PenaltyWatch,
+    team: u8,
+    triggers: Triggers,
+    status: Arc<Status>,
+) {
+    let mut buffer = vec![0u8; MAX_DATAGRAM];
+    let mut rejects = RejectLog::default();
+    loop {
+        let length = match socket.recv_from(&mut buffer).await {
+            Ok((length, _)) => length,
+            Err(error) => {
+                warn!("GameController socket: {error}");
+                tokio::time::sleep(Duration::from_millis(100)).await;
+                continue;
+            }
+        };
+        let packet = match GameControlData::parse(&buffer[..length]) {
+            Ok(packet) => packet,
+            Err(error) => {
+                status.update(|report| report.rejected.gamecontroller += 1);
+                rejects.log("GameController packet", &error);
+                continue;
+            }
+        };
+        let Some(ours) = packet.team_info(team) else { continue };
+        let returned = watch.update(&packet);
+        if let Some(penalty) = watch.penalty() {
+            status.set_game(GameInfo { state: packet.state, set_play: packet.set_play, penalty, age_s: 0.0 });
+        }
+        debug!("GameController: {:?}, our team's score {}", packet.state, ours.score);
+        if let Some(returned) = returned {
+            let reason =
+                serde_json::to_value(returned.penalty).ok().and_then(|v| v.as_str().map(String::from));
+            triggers.fire(TriggerKind::PenaltyReturn, reason, None);
+        }
+    }
+}
+
+/// Feeds one sensor sample to the detector; fires a trigger for a fall or pick-up.
+fn take_sample(
+    state: &LolaState,
+    started: Instant,
+    detector: &mut PostureDetector,
+    steadiness: &Steadiness,
+    triggers: &Triggers,
+) {
+    let event = detector.update(started.elapsed().as_secs_f64(), state);
+    steadiness.report(detector.is_settled());
+    if let Some(event) = event {
+        let kind = match event {
+            PostureEvent::Fall => TriggerKind::Fall,
+            PostureEvent::PickUp => TriggerKind::PickUp,
+        };
+        triggers.fire(kind, None, None);
+    }
+}
+
+/// LoLA state messages forwarded as datagrams, one per datagram.
+pub async fn sensor_datagrams(
+    socket: Datagram,
+    mut detector: PostureDetector,
+    steadiness: Arc<Steadiness>,
+    triggers: Triggers,
+    status: Arc<Status>,
+) {
+    let started = Instant::now();
+    let mut buffer = vec![0u8; MAX_DATAGRAM];
+    let mut rejects = RejectLog::default();
+    loop {
+        let length = match socket.recv_from(&mut buffer).await {
+            Ok((length, _)) => length,
+            Err(error) => {
+                warn!("sensor socket: {error}");
+                tokio::time::sleep(Duration::from_millis(100)).await;
+                continue;
+            }
+        };
+        match LolaState::from_msgpack(&buffer[..length]) {
+            Ok(state) => take_sample(&state, started, &mut detector, &steadiness, &triggers),
+            Err(error) => {
+                status.update(|report| report.rejected.sensors += 1);
+                rejects.log("sensor message", &error);
+            }
+        }
+    }
+}
+
+/// LoLA's own stream socket, read as its client: reconnects with a pause when LoLA goes away.
+pub async fn lola_stream(
+    path: PathBuf,
+    mut detector: PostureDetector,
+    steadiness: Arc<Steadiness>,
+    triggers: Triggers,
+    status: Arc<Status>,
+) {
+    let started = Instant::now();
+    let mut rejects = RejectLog::default();
+    loop {
+        match UnixStream::connect(&path).await {
+            Ok(mut stream) => {
+                info!("reading LoLA at {}", path.display());
+                let mut buffer = Vec::with_capacity(4096);
+                let mut chunk = [0u8; 4096];
+                loop {
+                    let length = match stream.read(&mut chunk).await {
+                        Ok(0) | Err(_) => break,
+                        Ok(length) => length,
+                    };
+                    buffer.extend_from_slice(&chunk[..length]);
+                    while let Some(length) = next_msgpack_value(&buffer) {
+                        match LolaState::from_msgpack(&buffer[..length]) {
+                            Ok(state) => take_sample(&state, started, &mut detector, &steadiness, &triggers),
+                            Err(error) => {
+                                status.update(|report| report.rejected.sensors += 1);
+                                rejects.log("LoLA message", &error);
+                            }
+                        }
+                        buffer.drain(..length);
+                    }
+                    if buffer.len() > MAX_LOLA_BUFFER {
+                        status.update(|report| report.rejected.sensors += 1);
+                        rejects.log("LoLA stream", &"no whole message in 64 KiB, skipping it");
+                        buffer.clear();
+                    }
+                }
+                warn!("LoLA at {} closed the connection", path.display());
+            }
+            Err(error) => debug!("cannot connect to LoLA at {}: {error}", path.display()),
+        }
+        tokio::time::sleep(Duration::from_secs(1)).await;
+    }
+}
+
+/// Length of the first whole msgpack value in `bytes`, if one is complete. Malformed bytes count as
+/// a one-byte value, so the caller's decoder refuses them and the stream moves on.
+fn next_msgpack_value(bytes: &[u8]) -> Option<usize> {
+    if bytes.is_empty() {
+        return None;
+    }
+    let mut rest = bytes;
+    match rmp_serde::from_read::<_, serde::de::IgnoredAny>(&mut rest) {
+        Ok(_) => Some(bytes.len() - rest.len()),
+        Err(
+            rmp_serde::decode::Error::InvalidMarkerRead(error)
+            | rmp_serde::decode::Error::InvalidDataRead(error),
+        ) if error.kind() == std::io::ErrorKind::UnexpectedEof => None,
+        Err(_) => Some(1),
+    }
+}
+
+/// The control socket: `{"relocalise": …}` answers `{"accepted": {"trigger": ID}}`, `{"status": {}}`
+/// answers the counters, anything else `{"error": …}`.
+pub async fn control(socket: Datagram, triggers: Triggers, status: Arc<Status>) {
+    let mut buffer = vec![0u8; MAX_DATAGRAM];
+    let mut rejects = RejectLog::default();
+    loop {
+        let (length, peer) = match socket.recv_from(&mut buffer).await {
+            Ok(received) => received,
+            Err(error) => {
+                warn!("control socket: {error}");
+                tokio::time::sleep(Duration::from_millis(100)).await;
+                continue;
+            }
+        };
+        let answer = match ControlRequest::parse(&buffer[..length]) {
+            Ok(ControlRequest::Relocalise(request)) => {
+                match triggers.fire(TriggerKind::Request, request.reason, request.head_yaw) {
+                    Some(id) => serde_json::json!({ "accepted": { "trigger": id } }),
+                    None => serde_json::json!({ "error": "too many triggers waiting; try again" }),
+                }
+            }
+            Ok(ControlRequest::Status(_)) => serde_json::json!({ "status": status.snapshot() }),
+            Err(error) => {
+                status.update(|report| report.rejected.control += 1);
+                rejects.log("control request", &error);
+                serde_json::json!({ "error": error.to_string() })
+            }
+        };
+        if let Err(error) = socket.send_to(answer.to_string().as_bytes(), &peer).await {
+            debug!("cannot answer a control request: {error}");
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn msgpack_values_are_found_whole_in_a_stream() {
+        let state = serde_json::json!({"Angles": [0.0, 0.1], "Gyroscope": [0, 0, 0], "FSR": [1, 1, 1, 1, 1, 1, 1, 1]});
+        let one = rmp_serde::to_vec_named(&state).unwrap();
+        let two = [one.clone(), one.clone()].concat();
+        assert_eq!(next_msgpack_value(&two), Some(one.len()));
+        assert_eq!(next_msgpack_value(&one[..one.len() - 3]), None, "wait for the rest");
+        assert_eq!(next_msgpack_value(b"\xc1rest"), Some(1), "0xc1 is never valid: skip it");
+        assert_eq!(next_msgpack_value(b""), None);
+    }
+
+    #[tokio::test]
+    async fn a_full_queue_drops_and_counts_the_trigger() {
+        let status = Arc::new(Status::new("sim".into(), "model".into()));
+        let (triggers, mut receiver) = Triggers::channel(1, status.clone());
+        assert_eq!(triggers.fire(TriggerKind::Request, None, None), Some(1));
+        assert_eq!(triggers.fire(TriggerKind::Fall, None, None), None);
+        let report = status.snapshot();
+        assert_eq!((report.triggers.request, report.triggers.fall, report.triggers_dropped), (1, 1, 1));
+        assert_eq!(receiver.recv().await.unwrap().id, 1);
+    }
+}

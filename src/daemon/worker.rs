@@ -1,0 +1,258 @@
+//! The relocalisation thread: waits for triggers, coalesces those that arrive together, waits for a
+//! steady robot, captures a burst, relocalises every frame, fuses, applies the game prior, and
+//! publishes one message that answers every trigger it took. The only place inference runs.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use tokio::sync::mpsc;
+use tracing::{info, warn};
+
+use super::config::BurstConfig;
+use super::publish::Publisher;
+use super::source::{CaptureRequest, CapturedFrame, FrameSource, unix_now};
+use super::status::Status;
+use super::triggers::{Steadiness, TriggerEvent};
+use crate::protocol::message::{
+    FrameCounts, Hypothesis, Latency, Message, ModelInfo, SCHEMA_VERSION, Trigger, TriggerKind,
+};
+use crate::relocaliser::{PlacementPrior, Prediction, Relocaliser, fuse};
+
+/// How often the settle wait looks at the sensors.
+const SETTLE_POLL: Duration = Duration::from_millis(20);
+
+/// Everything the relocalisation thread owns.
+pub struct Worker {
+    /// The network.
+    pub relocaliser: Relocaliser,
+    /// Where frames come from.
+    pub source: Box<dyn FrameSource>,
+    /// Where messages go.
+    pub publisher: Publisher,
+    /// Burst size and timing.
+    pub burst: BurstConfig,
+    /// Head yaw when neither frame nor trigger gives one, radians.
+    pub default_head_yaw: f64,
+    /// Whether the robot stands still, from the sensor task.
+    pub steadiness: Arc<Steadiness>,
+    /// Counters.
+    pub status: Arc<Status>,
+    /// Set on shutdown.
+    pub stop: Arc<AtomicBool>,
+}
+
+/// Where the time of one burst went.
+struct BurstTimes {
+    capture_started: Instant,
+    capture_ms: f64,
+    preprocess_ms: f64,
+    inference_ms: f64,
+    fusion_ms: f64,
+}
+
+impl Worker {
+    /// Runs until the trigger channel closes or `stop` is set.
+    pub fn run(mut self, mut triggers: mpsc::Receiver<TriggerEvent>) {
+        let mut seq = 0;
+        let mut last_burst: Option<Instant> = None;
+        while let Some(first) = triggers.blocking_recv() {
+            let mut batch = vec![first];
+            if let Some(last) = last_burst {
+                let ready = last + Duration::from_millis(self.burst.min_interval_ms);
+                if !self.sleep_until(ready) {
+                    break;
+                }
+            }
+            self.settle();
+            while let Ok(more) = triggers.try_recv() {
+                batch.push(more);
+            }
+            if self.stop.load(Ordering::Relaxed) {
+                break;
+            }
+            if batch.len() > 1 {
+                self.status.update(|report| report.coalesced += batch.len() as u64 - 1);
+            }
+            last_burst = Some(Instant::now());
+            seq += 1;
+            let message = self.relocalise(seq, &batch);
+            let refused = self.publisher.publish(&message);
+            self.status.update(|report| {
+                report.bursts += 1;
+                report.published += 1;
+                report.failures += u64::from(message.failure.is_some());
+                report.publish_errors += refused;
+                report.last_latency_ms = Some(message.latency_ms);
+            });
+        }
+    }
+
+    /// Sleeps until `until`; false if the daemon is stopping.
+    fn sleep_until(&self, until: Instant) -> bool {
+        while Instant::now() < until {
+            if self.stop.load(Ordering::Relaxed) {
+                return false;
+            }
+            std::thread::sleep((until - Instant::now()).min(Duration::from_millis(50)));
+        }
+        !self.stop.load(Ordering::Relaxed)
+    }
+
+    /// Waits until the sensors say the robot stands still, they go quiet, or the settle timeout.
+    fn settle(&self) {
+        let deadline = Instant::now() + Duration::from_millis(self.burst.settle_timeout_ms);
+        while Instant::now() < deadline && !self.stop.load(Ordering::Relaxed) {
+            if self.steadiness.now() != Some(false) {
+                return;
+            }
+            std::thread::sleep(SETTLE_POLL);
+        }
+        info!("the robot did not settle within {} ms; capturing anyway", self.burst.settle_timeout_ms);
+    }
+
+    /// One burst for `batch`, as a message.
+    fn relocalise(&mut self, seq: u64, batch: &[TriggerEvent]) -> Message {
+        let contract = self.relocaliser.model().contract();
+        let head_yaw =
+            batch.iter().rev().find_map(|trigger| trigger.head_yaw).unwrap_or(self.default_head_yaw);
+        let penalty_return = batch.iter().any(|trigger| trigger.kind == TriggerKind::PenaltyReturn);
+        let mut message = Message {
+            schema: SCHEMA_VERSION,
+            seq,
+            published: 0.0,
+            captured: None,
+            triggers: batch
+                .iter()
+                .map(|trigger| Trigger {
+                    id: trigger.id,
+                    kind: trigger.kind,
+                    reason: trigger.reason.clone(),
+                    t: trigger.t,
+                })
+                .collect(),
+            model: ModelInfo { id: contract.model_id.clone(), representation: contract.representation },
+            frames: FrameCounts { requested: self.burst.frames as u32, used: 0, agreeing: 0 },
+            prior: None,
+            latency_ms: Latency::default(),
+            hypotheses: Vec::new(),
+            failure: None,
+        };
+        let first_at = batch[0].at;
+        let mut times = BurstTimes {
+            capture_started: Instant::now(),
+            capture_ms: 0.0,
+            preprocess_ms: 0.0,
+            inference_ms: 0.0,
+            fusion_ms: 0.0,
+        };
+        match self.estimate(head_yaw, penalty_return, &mut times, &mut message) {
+            Ok(()) => {}
+            Err(failure) => {
+                warn!("relocalisation {seq} failed: {failure}");
+                message.hypotheses.clear();
+                message.failure = Some(failure);
+            }
+        }
+        let ms = |duration: Duration| duration.as_secs_f64() * 1e3;
+        message.latency_ms = Latency {
+            wait: ms(times.capture_started - first_at),
+            capture: times.capture_ms,
+            preprocess: times.preprocess_ms,
+            inference: times.inference_ms,
+            fusion: times.fusion_ms,
+            total: ms(first_at.elapsed()),
+        };
+        message.published = unix_now();
+        message
+    }
+
+    /// Captures, relocalises and fuses into `message`; the failure reason otherwise.
+    fn estimate(
+        &mut self,
+        head_yaw: f64,
+        penalty_return: bool,
+        times: &mut BurstTimes,
+        message: &mut Message,
+    ) -> Result<(), String> {
+        let request = CaptureRequest {
+            count: self.burst.frames,
+            spacing: Duration::from_millis(self.burst.spacing_ms),
+            deadline: times.capture_started + Duration::from_millis(self.burst.timeout_ms),
+            stop: &self.stop,
+        };
+        let frames = self.source.capture(&request);
+        times.capture_ms = times.capture_started.elapsed().as_secs_f64() * 1e3;
+        let frames = frames.map_err(|error| format!("no frames: {error}"))?;
+        message.captured = frames.first().map(|frame| frame.taken);
+
+        let mut predictions: Vec<Prediction> = Vec::with_capacity(frames.len());
+        let mut errors = Vec::new();
+        for captured in &frames {
+            let yaw = captured.camera.map_or(head_yaw, |camera| camera.head_yaw());
+            match self.relocaliser.relocalise(&captured.frame, yaw) {
+                Ok(result) => {
+                    times.preprocess_ms += result.timings.preprocess_ms;
+                    times.inference_ms += result.timings.inference_ms;
+                    times.fusion_ms += result.timings.decode_ms;
+                    predictions.push(result.prediction);
+                }
+                Err(error) => errors.push(error.to_string()),
+            }
+        }
+        if let Some(error) = errors.first() {
+            warn!("{} of {} frames could not be relocalised: {error}", errors.len(), frames.len());
+        }
+        let fusing = Instant::now();
+        let mut estimate = fuse(&predictions).map_err(|error| match errors.first() {
+            Some(frame_error) => format!("no frame could be relocalised: {frame_error}"),
+            None => error.to_string(),
+        })?;
+        if penalty_return {
+            PlacementPrior::penalty_return().apply(&mut estimate.hypotheses);
+            message.prior = Some("penalty_return".into());
+        }
+        times.fusion_ms += fusing.elapsed().as_secs_f64() * 1e3;
+        message.frames.used = estimate.frames as u32;
+        message.frames.agreeing = estimate.agreeing as u32;
+        message.hypotheses = estimate
+            .hypotheses
+            .iter()
+            .map(|h| Hypothesis {
+                x: h.pose.x(),
+                y: h.pose.y(),
+                theta: h.pose.heading(),
+                weight: h.weight,
+                sigma: [h.sigma.x, h.sigma.y, h.sigma.theta],
+            })
+            .collect();
+        log_result(message, &frames);
+        Ok(())
+    }
+}
+
+/// Logs the best hypothesis, and its error where the source knows the truth (replay, sim).
+fn log_result(message: &Message, frames: &[CapturedFrame]) {
+    let Some(best) = message.hypotheses.first() else { return };
+    let truth = frames.iter().find_map(|frame| frame.truth);
+    let error = truth.map(|truth| {
+        format!(
+            ", truth ({:.2}, {:.2}, {:.0}°): {:.0} cm off",
+            truth.x(),
+            truth.y(),
+            truth.heading().to_degrees(),
+            (best.x - truth.x()).hypot(best.y - truth.y()) * 100.0
+        )
+    });
+    info!(
+        "relocalisation {}: ({:.2} m, {:.2} m, {:.0}°) weight {:.2} from {}/{} frames{}",
+        message.seq,
+        best.x,
+        best.y,
+        best.theta.to_degrees(),
+        best.weight,
+        message.frames.agreeing,
+        message.frames.used,
+        error.unwrap_or_default()
+    );
+}
