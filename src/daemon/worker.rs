@@ -236,12 +236,17 @@ fn log_result(message: &Message, frames: &[CapturedFrame]) {
     let Some(best) = message.hypotheses.first() else { return };
     let truth = frames.iter().find_map(|frame| frame.truth);
     let error = truth.map(|truth| {
+        let closest = message
+            .hypotheses
+            .iter()
+            .map(|h| (h.x - truth.x()).hypot(h.y - truth.y()))
+            .fold(f64::INFINITY, f64::min);
         format!(
-            ", truth ({:.2}, {:.2}, {:.0}°): {:.0} cm off",
+            "; truth ({:.2} m, {:.2} m, {:.0}°), closest hypothesis {:.0} cm off",
             truth.x(),
             truth.y(),
             truth.heading().to_degrees(),
-            (best.x - truth.x()).hypot(best.y - truth.y()) * 100.0
+            closest * 100.0
         )
     });
     info!(

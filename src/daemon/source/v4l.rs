@@ -111,7 +111,7 @@ impl V4lSource {
 impl FrameSource for V4lSource {
     fn capture(&mut self, request: &CaptureRequest<'_>) -> Result<Vec<CapturedFrame>, SourceError> {
         let mut streaming = match self.streaming.take() {
-            Some(streaming) => {
+            Some(mut streaming) => {
                 // Buffers filled while nobody looked are stale.
                 for _ in 0..BUFFERS {
                     let _ = streaming.stream.next();
