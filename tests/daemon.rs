@@ -356,3 +356,28 @@ fn a_bad_config_is_refused_with_the_key() {
     assert!(!output.status.success());
     assert!(String::from_utf8_lossy(&output.stderr).contains("unknown frame source"));
 }
+
+#[cfg(feature = "v4l")]
+#[test]
+fn a_camera_that_cannot_be_opened_gives_a_failure_message() {
+    let daemon = Daemon::start("v4l:{dir}/no-such-camera", &[]);
+    daemon.control(br#"{"relocalise": {}}"#);
+    let message = daemon.message();
+    assert!(message.hypotheses.is_empty());
+    let failure = message.failure.unwrap();
+    assert!(failure.contains("no-such-camera") && failure.contains("cannot open"), "{failure}");
+    // Still up: a status request is answered.
+    assert_eq!(daemon.status()["failures"], 1);
+    daemon.stop();
+}
+
+#[cfg(not(feature = "v4l"))]
+#[test]
+fn without_the_v4l_feature_a_camera_source_says_how_to_get_one() {
+    let output = Command::new(env!("CARGO_BIN_EXE_relocd"))
+        .args(["run", "--source", "v4l:/dev/video-top", "--control", "off", "--sensors", "off"])
+        .output()
+        .unwrap();
+    assert!(!output.status.success());
+    assert!(String::from_utf8_lossy(&output.stderr).contains("--features v4l"));
+}
