@@ -60,11 +60,12 @@ impl Daemon {
             TEAM.to_string(),
             "--player".into(),
             PLAYER.to_string(),
-            "--sensors".into(),
-            format!("unix:{}", path("sensors")),
             "--control".into(),
             format!("unix:{}", path("control")),
         ];
+        if !extra.contains(&"--sensors") {
+            args.extend(["--sensors".into(), format!("unix:{}", path("sensors"))]);
+        }
         args.extend(extra.iter().map(|arg| arg.to_string()));
         let child = Command::new(env!("CARGO_BIN_EXE_relocd"))
             .args(&args)
@@ -75,7 +76,7 @@ impl Daemon {
             .expect("relocd starts");
         let client = UnixDatagram::bind(dir.path().join("client")).unwrap();
         client.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
-        let daemon = Self { child, dir, published, gamecontroller_port, client };
+        let mut daemon = Self { child, dir, published, gamecontroller_port, client };
         daemon.wait_until_ready();
         daemon
     }
@@ -84,9 +85,12 @@ impl Daemon {
         self.dir.path().join(name)
     }
 
-    fn wait_until_ready(&self) {
+    fn wait_until_ready(&mut self) {
         let started = Instant::now();
         while !self.socket("control").exists() {
+            if let Some(status) = self.child.try_wait().unwrap() {
+                panic!("relocd exited before it was ready: {status}");
+            }
             assert!(started.elapsed() < Duration::from_secs(30), "relocd did not open its control socket");
             std::thread::sleep(Duration::from_millis(20));
         }
@@ -246,6 +250,34 @@ fn a_fall_a_pick_up_and_a_request_are_each_answered() {
     assert_eq!(status["triggers"]["fall"], 1);
     assert_eq!(status["triggers"]["pick_up"], 1);
     assert_eq!(status["bursts"], 3);
+    daemon.stop();
+}
+
+#[test]
+fn lola_s_own_socket_is_read_as_a_stream() {
+    let dir = tempfile::tempdir().unwrap();
+    let lola = std::os::unix::net::UnixListener::bind(dir.path().join("robocup")).unwrap();
+    let lola_path = dir.path().join("robocup");
+    let daemon = Daemon::start(
+        "replay:{sample}",
+        &["--burst", "1", "--sensors", &format!("lola:{}", lola_path.display())],
+    );
+    let (mut stream, _) = lola.accept().expect("relocd connects to LoLA");
+    let message = |angles: [f32; 2], fsr: f32| {
+        let state = serde_json::json!({"Angles": angles, "Gyroscope": [0.0, 0.0, 0.0], "FSR": vec![fsr; 8]});
+        rmp_serde::to_vec_named(&state).unwrap()
+    };
+    // LoLA's stream has no framing: messages back to back, split anywhere.
+    let (standing, lying) = (message([0.0, 0.0], 1.3), message([0.0, 1.5], 0.0));
+    for (state, cycles) in [(&standing, 40), (&lying, 80), (&standing, 150)] {
+        for _ in 0..cycles {
+            let (head, tail) = state.split_at(7);
+            stream.write_all(head).unwrap();
+            stream.write_all(tail).unwrap();
+            std::thread::sleep(Duration::from_millis(12));
+        }
+    }
+    assert_eq!(daemon.message().triggers[0].kind, TriggerKind::Fall);
     daemon.stop();
 }
 

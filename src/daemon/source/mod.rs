@@ -28,7 +28,7 @@ pub enum SourceError {
         reason: String,
     },
     /// Not enough frames before the deadline.
-    #[error("no frame arrived within {0:?}")]
+    #[error("no frame arrived within {:.1} s", .0.as_secs_f64())]
     Timeout(Duration),
     /// A recorded frame could not be read.
     #[error(transparent)]

@@ -69,8 +69,9 @@ impl ReplaySource {
 
 impl FrameSource for ReplaySource {
     fn capture(&mut self, request: &CaptureRequest<'_>) -> Result<Vec<CapturedFrame>, SourceError> {
+        let started = Instant::now();
         let mut frames = Vec::with_capacity(request.count);
-        let mut earliest = Instant::now();
+        let mut earliest = started;
         while frames.len() < request.count {
             let (index, shown) = match self.next_frame(earliest) {
                 Ok(next) => next,
@@ -93,7 +94,7 @@ impl FrameSource for ReplaySource {
             return Err(if request.stop.load(std::sync::atomic::Ordering::Relaxed) {
                 SourceError::Stopped
             } else {
-                SourceError::Timeout(request.deadline.saturating_duration_since(earliest))
+                SourceError::Timeout(request.deadline.saturating_duration_since(started))
             });
         }
         Ok(frames)
