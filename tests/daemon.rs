@@ -413,3 +413,14 @@ fn without_the_v4l_feature_a_camera_source_says_how_to_get_one() {
     assert!(!output.status.success());
     assert!(String::from_utf8_lossy(&output.stderr).contains("--features v4l"));
 }
+
+#[test]
+fn the_simulated_camera_relocalises_without_any_files() {
+    let daemon = Daemon::start("sim", &["--burst", "2"]);
+    daemon.control(br#"{"relocalise": {"reason": "demo"}}"#);
+    let message = daemon.message();
+    assert_eq!(message.frames.used, 2, "{:?}", message.failure);
+    assert_eq!(message.hypotheses.len(), 2);
+    assert!(message.captured.is_some());
+    daemon.stop();
+}
