@@ -128,6 +128,15 @@ impl Config {
         if self.burst.timeout_ms == 0 || self.burst.timeout_ms > 30_000 {
             return invalid("burst.timeout_ms", "must lie in 1..=30000");
         }
+        if self.burst.spacing_ms > 10_000 {
+            return invalid("burst.spacing_ms", "must lie in 0..=10000");
+        }
+        if self.burst.min_interval_ms > 600_000 {
+            return invalid("burst.min_interval_ms", "must lie in 0..=600000");
+        }
+        if self.burst.settle_timeout_ms > 60_000 {
+            return invalid("burst.settle_timeout_ms", "must lie in 0..=60000");
+        }
         if self.publish.targets.is_empty() {
             return invalid("publish.targets", "give at least one target, e.g. \"udp:127.0.0.1:5454\"");
         }

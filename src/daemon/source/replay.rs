@@ -63,7 +63,11 @@ impl ReplaySource {
             None => return Err(SourceError::Ended),
         };
         let shown = pass * self.period + records[index].t - self.first;
-        Ok((index, self.started + Duration::from_secs_f64(shown.max(0.0))))
+        Duration::try_from_secs_f64(shown.max(0.0))
+            .ok()
+            .and_then(|shown| self.started.checked_add(shown))
+            .map(|shown| (index, shown))
+            .ok_or(SourceError::Ended)
     }
 }
 

@@ -69,7 +69,7 @@ pub fn check_format(width: u32, height: u32, negotiated: &Negotiated) -> Result<
 /// Copies a driver buffer (`used` bytes valid, rows `stride` bytes apart) into a packed frame.
 pub fn frame_from_buffer(buffer: &[u8], used: usize, format: &Negotiated) -> Result<YuyvImage, String> {
     let (row, stride, rows) = (format.width as usize * 2, format.stride as usize, format.height as usize);
-    let needed = stride * (rows - 1) + row;
+    let needed = stride * rows.saturating_sub(1) + row;
     let valid = &buffer[..used.min(buffer.len())];
     if valid.len() < needed {
         return Err(format!(
