@@ -41,8 +41,9 @@ impl Daemon {
         published.set_read_timeout(Some(Duration::from_secs(30))).unwrap();
         let gamecontroller_port = UdpSocket::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
         let config = dir.path().join("relocd.toml");
-        std::fs::write(&config, "[burst]\nspacing_ms = 40\nmin_interval_ms = 100\nsettle_timeout_ms = 500\n")
-            .unwrap();
+        let settings = "[burst]\nspacing_ms = 40\nmin_interval_ms = 100\nsettle_timeout_ms = 500\n\
+                        [gamecontroller]\naddress = \"127.0.0.1\"\n";
+        std::fs::write(&config, settings).unwrap();
         let path = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
         let mut args = vec![
             "run".to_string(),
@@ -262,7 +263,18 @@ fn lola_s_own_socket_is_read_as_a_stream() {
         "replay:{sample}",
         &["--burst", "1", "--sensors", &format!("lola:{}", lola_path.display())],
     );
-    let (mut stream, _) = lola.accept().expect("relocd connects to LoLA");
+    lola.set_nonblocking(true).unwrap();
+    let started = Instant::now();
+    let mut stream = loop {
+        match lola.accept() {
+            Ok((stream, _)) => break stream,
+            Err(_) if started.elapsed() < Duration::from_secs(30) => {
+                std::thread::sleep(Duration::from_millis(20))
+            }
+            Err(error) => panic!("relocd did not connect to LoLA: {error}"),
+        }
+    };
+    stream.set_nonblocking(false).unwrap();
     let message = |angles: [f32; 2], fsr: f32| {
         let state = serde_json::json!({"Angles": angles, "Gyroscope": [0.0, 0.0, 0.0], "FSR": vec![fsr; 8]});
         rmp_serde::to_vec_named(&state).unwrap()
@@ -337,8 +349,8 @@ fn forwarded_frames_are_used_and_a_lying_header_is_dropped() {
     let mut liar = UnixStream::connect(&frames).unwrap();
     let mut header = FrameHeader { width: 640, height: 480, timestamp: 1.0, camera: None }.to_bytes();
     header[16..20].copy_from_slice(&1000u32.to_le_bytes());
-    liar.write_all(&header).unwrap();
-    liar.write_all(&[0u8; 1000]).unwrap();
+    // relocd may close the connection after the header: the write's result does not matter.
+    let _ = liar.write_all(&[&header[..], &[0u8; 1000]].concat());
 
     let image = sample_yuyv();
     let camera = Recording::open(&sample()).unwrap().records()[0].camera.unwrap_or(CameraPose::STANDING);
@@ -350,6 +362,11 @@ fn forwarded_frames_are_used_and_a_lying_header_is_dropped() {
             timestamp: 2.0,
             camera: Some(camera),
         };
+        // An impossible camera pitch drops that frame but keeps the connection in step.
+        let mut tilted = header.to_bytes();
+        tilted[36..40].copy_from_slice(&3.0f32.to_le_bytes());
+        stream.write_all(&tilted).unwrap();
+        stream.write_all(image.as_bytes()).unwrap();
         for _ in 0..40 {
             if stream.write_all(&header.to_bytes()).and_then(|()| stream.write_all(image.as_bytes())).is_err()
             {
@@ -363,7 +380,7 @@ fn forwarded_frames_are_used_and_a_lying_header_is_dropped() {
     let message = daemon.message();
     assert_eq!(message.frames.used, 2, "{:?}", message.failure);
     assert_eq!(message.hypotheses.len(), 2);
-    assert_eq!(daemon.status()["rejected"]["frames"], 1);
+    assert_eq!(daemon.status()["rejected"]["frames"], 2, "the lying header and the tilted frame");
     sender.join().unwrap();
     daemon.stop();
 }

@@ -103,17 +103,16 @@ impl Default for Config {
 }
 
 impl Config {
-    /// Reads and checks a config file.
+    /// Reads a config file: syntax, key names and value types. Ranges and combinations are checked
+    /// by [`Config::validate`], once flags have overridden keys.
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
         let text = std::fs::read_to_string(path)
             .map_err(|source| ConfigError::Read { path: path.to_path_buf(), source })?;
-        let config: Self = toml::from_str(&text)
-            .map_err(|error| ConfigError::Parse { path: path.to_path_buf(), message: error.to_string() })?;
-        config.validate()?;
-        Ok(config)
+        toml::from_str(&text)
+            .map_err(|error| ConfigError::Parse { path: path.to_path_buf(), message: error.to_string() })
     }
 
-    /// Checks what serde cannot: ranges and combinations. Call again after overriding keys.
+    /// Checks what serde cannot: ranges and combinations.
     pub fn validate(&self) -> Result<(), ConfigError> {
         let invalid = |key, reason: &str| Err(ConfigError::Invalid { key, reason: reason.into() });
         if self.player.is_some_and(|player| !(1..=20).contains(&player)) {
@@ -147,8 +146,11 @@ impl Config {
             return invalid("frames.queue", "must lie in 1..=1000");
         }
         let (width, height) = (self.camera.width, self.camera.height);
-        if width == 0 || height == 0 || width % 2 != 0 || width > 1280 || height > 960 {
-            return invalid("camera.width", "the camera size must be even and at most 1280×960");
+        if width == 0 || width % 2 != 0 || width > 1280 {
+            return invalid("camera.width", "must be even and at most 1280");
+        }
+        if height == 0 || height > 960 {
+            return invalid("camera.height", "must lie in 1..=960");
         }
         if !(1..=60).contains(&self.camera.fps) {
             return invalid("camera.fps", "must lie in 1..=60");
@@ -156,8 +158,26 @@ impl Config {
         if !self.camera.head_yaw_deg.is_finite() || self.camera.head_yaw_deg.abs() > 120.0 {
             return invalid("camera.head_yaw_deg", "must lie within ±120° (the Nao's head yaw range)");
         }
-        if !(8..=1280).contains(&self.sim.width) || !(6..=960).contains(&self.sim.height) {
-            return invalid("sim.width", "the simulated camera is 8×6 to 1280×960");
+        if !(8..=1280).contains(&self.sim.width) {
+            return invalid("sim.width", "must lie in 8..=1280");
+        }
+        if !(6..=960).contains(&self.sim.height) {
+            return invalid("sim.height", "must lie in 6..=960");
+        }
+        let unix_paths: Vec<&Path> = [Some(&self.control), self.sensors.listen()]
+            .into_iter()
+            .flatten()
+            .filter_map(|listen| match listen {
+                Listen::Unix(path) => Some(path.as_path()),
+                _ => None,
+            })
+            .chain(match &self.source {
+                SourceSpec::Frames(path) => Some(path.as_path()),
+                _ => None,
+            })
+            .collect();
+        if unix_paths.iter().enumerate().any(|(index, path)| unix_paths[..index].contains(path)) {
+            return invalid("control", "control, sensors and forwarded frames need different socket paths");
         }
         if !(-20..=19).contains(&self.process.nice) {
             return invalid("process.nice", "niceness lies in -20..=19");
@@ -430,6 +450,16 @@ pub enum SensorInput {
     Lola(PathBuf),
 }
 
+impl SensorInput {
+    /// The socket relocd binds, if any.
+    fn listen(&self) -> Option<&Listen> {
+        match self {
+            Self::Forwarded(listen) => Some(listen),
+            Self::Lola(_) => None,
+        }
+    }
+}
+
 impl FromStr for SensorInput {
     type Err = String;
 
@@ -509,13 +539,16 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("relocd.toml");
         std::fs::write(&path, text).unwrap();
-        Config::load(&path)
+        let config = Config::load(&path)?;
+        config.validate()?;
+        Ok(config)
     }
 
     #[test]
     fn the_shipped_config_parses_and_matches_the_defaults() {
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("deploy/relocd.toml");
         let shipped = Config::load(&path).unwrap();
+        shipped.validate().unwrap();
         let defaults = Config { team: shipped.team, player: shipped.player, ..Config::default() };
         assert_eq!(shipped, defaults, "deploy/relocd.toml should show the defaults");
     }
@@ -564,6 +597,8 @@ mod tests {
         assert!(message("team = 5\nplayer = 21").contains("`player`"));
         assert!(message("[camera]\nfps = \"fast\"").contains("fps"));
         assert!(message("source = ").contains("relocd.toml"));
+        assert!(message("[camera]\nheight = 0").contains("camera.height"));
+        assert!(message("control = \"unix:/tmp/x\"\nsensors = \"unix:/tmp/x\"").contains("different"));
     }
 
     #[test]

@@ -60,10 +60,13 @@ pub fn run(config: Config) -> anyhow::Result<()> {
 
     // Sockets are bound inside the runtime and owned by their tasks, which remove Unix socket files
     // when the runtime drops them at shutdown.
-    let source = runtime.block_on(async {
+    // Signal handlers come first, so that a SIGTERM during start-up is a clean stop too.
+    let (source, mut terminate, mut interrupt) = runtime.block_on(async {
+        let terminate = signal(SignalKind::terminate())?;
+        let interrupt = signal(SignalKind::interrupt())?;
         let source = open_source(&config, &model, &status)?;
         start_inputs(&config, &triggers, &steadiness, &status)?;
-        anyhow::Ok(source)
+        anyhow::Ok((source, terminate, interrupt))
     })?;
     drop(triggers);
 
@@ -77,25 +80,31 @@ pub fn run(config: Config) -> anyhow::Result<()> {
         status,
         stop: stop.clone(),
     };
+    // The sender drops when the thread ends, however it ends: a thread that died is noticed at once.
+    let (alive, exited) = tokio::sync::oneshot::channel::<()>();
     let worker = std::thread::Builder::new()
         .name("relocalise".into())
-        .spawn(move || worker.run(receiver))
+        .spawn(move || {
+            let _alive = alive;
+            worker.run(receiver);
+        })
         .context("cannot start the relocalisation thread")?;
     info!("relocd running: source {}, publishing to {}", config.source, targets(&config));
 
-    runtime.block_on(async {
-        let mut terminate = signal(SignalKind::terminate())?;
+    let worker_died = runtime.block_on(async {
         tokio::select! {
-            _ = terminate.recv() => info!("SIGTERM: shutting down"),
-            result = tokio::signal::ctrl_c() => { result?; info!("SIGINT: shutting down") }
+            _ = terminate.recv() => { info!("SIGTERM: shutting down"); false }
+            _ = interrupt.recv() => { info!("SIGINT: shutting down"); false }
+            _ = exited => true,
         }
-        anyhow::Ok(())
-    })?;
+    });
     stop.store(true, Ordering::Relaxed);
     // Dropping the runtime ends the input tasks, which closes the trigger channel.
     drop(runtime);
-    if worker.join().is_err() {
-        bail!("the relocalisation thread panicked");
+    if worker.join().is_err() || worker_died {
+        bail!(
+            "the relocalisation thread stopped unexpectedly (see the log above); exiting so the service restarts"
+        );
     }
     info!("stopped");
     Ok(())
@@ -187,6 +196,7 @@ fn start_inputs(
             let watch = PenaltyWatch::new(team, player);
             tokio::spawn(triggers::gamecontroller(socket, watch, team, triggers.clone(), status.clone()));
         }
+        _ if !gamecontroller.enabled => info!("GameController trigger off (gamecontroller.enabled = false)"),
         _ => info!("GameController trigger off (give team and player to turn it on)"),
     }
 

@@ -63,11 +63,12 @@ impl Datagram {
         }
     }
 
-    /// Answers `peer`; an unnamed peer cannot be answered and is skipped.
-    pub async fn send_to(&self, bytes: &[u8], peer: &Peer) -> io::Result<()> {
+    /// Answers `peer` without waiting: a peer whose queue is full (one that never reads) loses the
+    /// answer instead of stalling the socket. An unnamed peer cannot be answered and is skipped.
+    pub fn try_send_to(&self, bytes: &[u8], peer: &Peer) -> io::Result<()> {
         match (self, peer) {
-            (Self::Udp(socket), Peer::Udp(address)) => socket.send_to(bytes, address).await.map(drop),
-            (Self::Unix(socket, _), Peer::Unix(path)) => socket.send_to(bytes, path).await.map(drop),
+            (Self::Udp(socket), Peer::Udp(address)) => socket.try_send_to(bytes, *address).map(drop),
+            (Self::Unix(socket, _), Peer::Unix(path)) => socket.try_send_to(bytes, path).map(drop),
             _ => Ok(()),
         }
     }
@@ -111,10 +112,24 @@ pub fn bind_stream(path: &Path) -> io::Result<StreamListener> {
 pub struct SocketFile(PathBuf);
 
 impl SocketFile {
-    /// Removes a stale socket left by an earlier run; refuses to replace anything that is not a socket.
+    /// Removes a stale socket left by an earlier run; refuses to replace a socket something still
+    /// listens on, or anything that is not a socket.
     fn prepare(path: &Path) -> io::Result<Self> {
         match std::fs::symlink_metadata(path) {
-            Ok(metadata) if metadata.file_type().is_socket() => std::fs::remove_file(path)?,
+            Ok(metadata) if metadata.file_type().is_socket() => {
+                let probe = std::os::unix::net::UnixDatagram::unbound()?;
+                match probe.connect(path) {
+                    Err(error) if error.kind() == io::ErrorKind::ConnectionRefused => {
+                        std::fs::remove_file(path)?
+                    }
+                    _ => {
+                        return Err(io::Error::new(
+                            io::ErrorKind::AddrInUse,
+                            format!("{} is in use by another process", path.display()),
+                        ));
+                    }
+                }
+            }
             Ok(_) => {
                 return Err(io::Error::new(
                     io::ErrorKind::AlreadyExists,
@@ -163,11 +178,21 @@ mod tests {
         let mut buffer = [0u8; 16];
         let (length, peer) = socket.recv_from(&mut buffer).await.unwrap();
         assert_eq!(&buffer[..length], b"ping");
-        socket.send_to(b"pong", &peer).await.unwrap();
+        socket.try_send_to(b"pong", &peer).unwrap();
         assert_eq!(client.recv(&mut buffer).unwrap(), 4);
 
         drop(socket);
         assert!(!path.exists(), "the socket file goes with the socket");
+    }
+
+    #[test]
+    fn a_live_socket_is_never_taken_over() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("sensors");
+        let _owner = std::os::unix::net::UnixDatagram::bind(&path).unwrap();
+        let error = SocketFile::prepare(&path).unwrap_err();
+        assert!(error.to_string().contains("in use"), "{error}");
+        assert!(path.exists());
     }
 
     #[test]

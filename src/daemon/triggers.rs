@@ -27,6 +27,9 @@ const SENSORS_FRESH: Duration = Duration::from_millis(300);
 /// LoLA's stream is dropped and re-read when this much arrives without a whole message.
 const MAX_LOLA_BUFFER: usize = 64 * 1024;
 
+/// Why a trigger was refused when too many wait.
+const TRIGGER_QUEUE_FULL: &str = "too many triggers are waiting for the relocalisation thread";
+
 /// A request to relocalise.
 #[derive(Clone, Debug, PartialEq)]
 pub struct TriggerEvent {
@@ -70,8 +73,13 @@ impl Triggers {
         );
         match self.sender.try_send(event) {
             Ok(()) => Some(id),
-            Err(error) => {
-                warn!("trigger {id} dropped: {error}");
+            Err(mpsc::error::TrySendError::Full(_)) => {
+                warn!("trigger {id} refused: {TRIGGER_QUEUE_FULL}");
+                self.status.update(|report| report.triggers_dropped += 1);
+                None
+            }
+            Err(mpsc::error::TrySendError::Closed(_)) => {
+                warn!("trigger {id} refused: the relocalisation thread has stopped");
                 self.status.update(|report| report.triggers_dropped += 1);
                 None
             }
@@ -282,7 +290,7 @@ pub async fn control(socket: Datagram, triggers: Triggers, status: Arc<Status>) 
             Ok(ControlRequest::Relocalise(request)) => {
                 match triggers.fire(TriggerKind::Request, request.reason, request.head_yaw) {
                     Some(id) => serde_json::json!({ "accepted": { "trigger": id } }),
-                    None => serde_json::json!({ "error": "too many triggers waiting; try again" }),
+                    None => serde_json::json!({ "error": format!("{TRIGGER_QUEUE_FULL}; try again") }),
                 }
             }
             Ok(ControlRequest::Status(_)) => serde_json::json!({ "status": status.snapshot() }),
@@ -292,7 +300,7 @@ pub async fn control(socket: Datagram, triggers: Triggers, status: Arc<Status>) 
                 serde_json::json!({ "error": error.to_string() })
             }
         };
-        if let Err(error) = socket.send_to(answer.to_string().as_bytes(), &peer).await {
+        if let Err(error) = socket.try_send_to(answer.to_string().as_bytes(), &peer) {
             debug!("cannot answer a control request: {error}");
         }
     }

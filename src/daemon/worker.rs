@@ -77,14 +77,15 @@ impl Worker {
             last_burst = Some(Instant::now());
             seq += 1;
             let message = self.relocalise(seq, &batch);
-            let refused = self.publisher.publish(&message);
+            // Counted before sending, so a status request that follows the message sees it.
             self.status.update(|report| {
                 report.bursts += 1;
                 report.published += 1;
                 report.failures += u64::from(message.failure.is_some());
-                report.publish_errors += refused;
                 report.last_latency_ms = Some(message.latency_ms);
             });
+            let refused = self.publisher.publish(&message);
+            self.status.update(|report| report.publish_errors += refused);
         }
     }
 
@@ -107,6 +108,9 @@ impl Worker {
                 return;
             }
             std::thread::sleep(SETTLE_POLL);
+        }
+        if self.stop.load(Ordering::Relaxed) {
+            return;
         }
         info!("the robot did not settle within {} ms; capturing anyway", self.burst.settle_timeout_ms);
     }

@@ -35,7 +35,7 @@ pub const MAX_PIXELS: u64 = 1280 * 960;
 
 const FLAG_CAMERA_POSE: u32 = 1;
 
-/// Why a header is refused. After any of these the stream cannot be trusted to be in step.
+/// Why a header is refused.
 #[derive(Debug, Error, PartialEq)]
 pub enum HeaderError {
     /// The magic is not "RLF1".
@@ -44,9 +44,28 @@ pub enum HeaderError {
     /// Another header version.
     #[error("forwarded frame header version {0}, this relocd reads version {VERSION}")]
     Version(u16),
-    /// A field out of range.
+    /// A framing field (format, size, payload length) out of range: the stream is out of step.
     #[error("forwarded frame header: {0}")]
     Invalid(String),
+    /// The framing is sound but a content field (flags, timestamp, camera pose) is not: skip
+    /// `payload` bytes and the stream is in step again.
+    #[error("forwarded frame header: {reason}")]
+    Content {
+        /// Bytes of the frame that follow.
+        payload: usize,
+        /// What is wrong.
+        reason: String,
+    },
+}
+
+impl HeaderError {
+    /// Bytes to skip to stay in step, or `None` when the stream cannot be trusted any more.
+    pub fn skippable_payload(&self) -> Option<usize> {
+        match self {
+            Self::Content { payload, .. } => Some(*payload),
+            _ => None,
+        }
+    }
 }
 
 /// A decoded, checked header.
@@ -98,19 +117,20 @@ impl FrameHeader {
                 pixels * 2
             ));
         }
+        let content = |reason: String| HeaderError::Content { payload: payload as usize, reason };
         let flags = u32_at(20);
         if flags & !FLAG_CAMERA_POSE != 0 {
-            return invalid(format!("unknown flags {flags:#x}"));
+            return Err(content(format!("unknown flags {flags:#x}")));
         }
         let timestamp = f64::from_le_bytes(bytes[24..32].try_into().expect("8 bytes"));
         if !timestamp.is_finite() {
-            return invalid(format!("timestamp {timestamp} is not finite"));
+            return Err(content(format!("timestamp {timestamp} is not finite")));
         }
         let camera = if flags & FLAG_CAMERA_POSE != 0 {
             let [height, pitch, roll, yaw] = [32, 36, 40, 44].map(|at| f64::from(f32_at(at)));
             Some(
                 CameraPose::new(height, pitch, roll, yaw)
-                    .map_err(|error| HeaderError::Invalid(format!("camera pose: {error}")))?,
+                    .map_err(|error| content(format!("camera pose: {error}")))?,
             )
         } else {
             None
@@ -181,6 +201,13 @@ mod tests {
         assert!(patch(20, &6u32.to_le_bytes()).contains("flags"));
         assert!(patch(24, &f64::NAN.to_le_bytes()).contains("timestamp"));
         assert!(patch(32, &(-1f32).to_le_bytes()).contains("camera pose"));
+
+        let mut bytes = header().to_bytes();
+        bytes[36..40].copy_from_slice(&3.0f32.to_le_bytes());
+        let skip = FrameHeader::parse(&bytes).unwrap_err().skippable_payload();
+        assert_eq!(skip, Some(640 * 480 * 2), "a bad pitch drops the frame, not the connection");
+        bytes[0] = b'X';
+        assert_eq!(FrameHeader::parse(&bytes).unwrap_err().skippable_payload(), None);
     }
 
     proptest! {

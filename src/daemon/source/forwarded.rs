@@ -148,10 +148,17 @@ async fn serve(mut stream: UnixStream, queue: Arc<FrameQueue>, status: Arc<Statu
         let header = match FrameHeader::parse(&header_bytes) {
             Ok(header) => header,
             Err(error) => {
-                // The stream is out of step: the payload's length cannot be trusted.
-                warn!("forwarded frame refused, closing the connection: {error}");
                 status.update(|report| report.rejected.frames += 1);
-                return;
+                let Some(payload) = error.skippable_payload() else {
+                    warn!("forwarded frame refused, closing the connection (out of step): {error}");
+                    return;
+                };
+                warn!("forwarded frame dropped: {error}");
+                let mut rest = (&mut stream).take(payload as u64);
+                if tokio::io::copy(&mut rest, &mut tokio::io::sink()).await.ok() != Some(payload as u64) {
+                    return;
+                }
+                continue;
             }
         };
         let mut payload = vec![0u8; header.payload_size()];

@@ -36,6 +36,9 @@ pub enum SourceError {
     /// A replay without looping has played its last frame.
     #[error("the recording has ended (set replay.loop = true to play it again)")]
     Ended,
+    /// The recording's timestamps span more time than a clock can hold.
+    #[error("the recording's timestamps span {0} s, too long to play")]
+    Unplayable(f64),
     /// The daemon is shutting down.
     #[error("shutting down")]
     Stopped,
@@ -72,19 +75,25 @@ pub struct CaptureRequest<'a> {
 }
 
 impl CaptureRequest<'_> {
-    /// Sleeps until `until` in short steps, so a shutdown is noticed; false if stopped or past the
-    /// deadline first.
+    /// Sleeps until `until` in short steps, so a shutdown is noticed; false (at once, or at the
+    /// deadline) if stopped or `until` lies past the deadline.
     pub fn sleep_until(&self, until: Instant) -> bool {
+        let wake = until.min(self.deadline);
         loop {
-            if self.stop.load(Ordering::Relaxed) {
+            if self.stopped() {
                 return false;
             }
             let now = Instant::now();
-            if now >= until {
+            if now >= wake {
                 return until <= self.deadline;
             }
-            std::thread::sleep((until - now).min(Duration::from_millis(50)));
+            std::thread::sleep((wake - now).min(Duration::from_millis(50)));
         }
+    }
+
+    /// Whether the daemon is shutting down.
+    pub fn stopped(&self) -> bool {
+        self.stop.load(Ordering::Relaxed)
     }
 }
 

@@ -67,7 +67,7 @@ impl ReplaySource {
             .ok()
             .and_then(|shown| self.started.checked_add(shown))
             .map(|shown| (index, shown))
-            .ok_or(SourceError::Ended)
+            .ok_or(SourceError::Unplayable(self.period))
     }
 }
 

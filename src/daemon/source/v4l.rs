@@ -55,7 +55,7 @@ impl V4lSource {
         Self { devices: candidate_devices(&device), width, height, fps, keep_streaming, streaming: None }
     }
 
-    fn open(&self, path: &PathBuf) -> Result<Streaming, String> {
+    fn open(&self, path: &PathBuf, request: &CaptureRequest<'_>) -> Result<Streaming, String> {
         let device = Device::with_path(path).map_err(|error| format!("cannot open: {error}"))?;
         let format = device
             .set_format(&Format::new(self.width, self.height, FourCC::new(&YUYV)))
@@ -76,9 +76,16 @@ impl V4lSource {
         }
         let mut stream = MmapStream::with_buffers(&device, Type::VideoCapture, BUFFERS)
             .map_err(|error| format!("cannot start streaming: {error}"))?;
-        stream.set_timeout(FRAME_TIMEOUT);
+        stream.set_timeout(
+            FRAME_TIMEOUT
+                .min(request.deadline.saturating_duration_since(Instant::now()))
+                .max(Duration::from_millis(1)),
+        );
         let mut streaming = Streaming { path: path.clone(), format, stream, _device: device };
         for _ in 0..WARM_UP_FRAMES {
+            if request.stopped() || Instant::now() >= request.deadline {
+                return Err("no frames before the burst's deadline".into());
+            }
             streaming.stream.next().map_err(|error| format!("no frames: {error}"))?;
         }
         info!("camera {} streaming {}×{} YUYV", path.display(), self.width, self.height);
@@ -91,7 +98,7 @@ impl V4lSource {
         for attempt in 0.. {
             failures.clear();
             for path in &self.devices {
-                match self.open(path) {
+                match self.open(path, request) {
                     Ok(streaming) => return Ok(streaming),
                     Err(reason) => failures.push(format!("{}: {reason}", path.display())),
                 }
@@ -124,7 +131,7 @@ impl FrameSource for V4lSource {
         let mut frames = Vec::with_capacity(request.count);
         let mut failure = None;
         let mut next = Instant::now();
-        while frames.len() < request.count && Instant::now() < request.deadline {
+        while frames.len() < request.count && Instant::now() < request.deadline && !request.stopped() {
             let (buffer, metadata) = match streaming.stream.next() {
                 Ok(frame) => frame,
                 Err(error) => {
