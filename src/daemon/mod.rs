@@ -194,7 +194,13 @@ fn start_inputs(
                 .with_context(|| format!("cannot listen for the GameController on {address}"))?;
             info!("GameController: team {team}, player {player}, on {address}");
             let watch = PenaltyWatch::new(team, player);
-            tokio::spawn(triggers::gamecontroller(socket, watch, team, triggers.clone(), status.clone()));
+            tokio::spawn(triggers::gamecontroller(
+                Datagram::Udp(socket),
+                watch,
+                team,
+                triggers.clone(),
+                status.clone(),
+            ));
         }
         _ if !gamecontroller.enabled => info!("GameController trigger off (gamecontroller.enabled = false)"),
         _ => info!("GameController trigger off (give team and player to turn it on)"),

@@ -9,11 +9,11 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use tokio::io::AsyncReadExt;
-use tokio::net::{UdpSocket, UnixStream};
+use tokio::net::UnixStream;
 use tokio::sync::mpsc;
 use tracing::{debug, info, warn};
 
-use super::sockets::{Datagram, MAX_DATAGRAM};
+use super::sockets::{Datagram, MAX_DATAGRAM, Peer};
 use super::source::unix_now;
 use super::status::{GameInfo, Status};
 use crate::posture::{PostureDetector, PostureEvent};
@@ -119,9 +119,22 @@ impl RejectLog {
     }
 }
 
+/// The next datagram; a socket error is logged and the read retried after a pause.
+async fn receive(socket: &Datagram, buffer: &mut [u8], input: &str) -> (usize, Peer) {
+    loop {
+        match socket.recv_from(buffer).await {
+            Ok(received) => return received,
+            Err(error) => {
+                warn!("{input} socket: {error}");
+                tokio::time::sleep(Duration::from_millis(100)).await;
+            }
+        }
+    }
+}
+
 /// GameController packets: our player's return from a penalty that moved it.
 pub async fn gamecontroller(
-    socket: UdpSocket,
+    socket: Datagram,
     mut watch: PenaltyWatch,
     team: u8,
     triggers: Triggers,
@@ -130,14 +143,7 @@ pub async fn gamecontroller(
     let mut buffer = vec![0u8; MAX_DATAGRAM];
     let mut rejects = RejectLog::default();
     loop {
-        let length = match socket.recv_from(&mut buffer).await {
-            Ok((length, _)) => length,
-            Err(error) => {
-                warn!("GameController socket: {error}");
-                tokio::time::sleep(Duration::from_millis(100)).await;
-                continue;
-            }
-        };
+        let (length, _) = receive(&socket, &mut buffer, "GameController").await;
         let packet = match GameControlData::parse(&buffer[..length]) {
             Ok(packet) => packet,
             Err(error) => {
@@ -191,14 +197,7 @@ pub async fn sensor_datagrams(
     let mut buffer = vec![0u8; MAX_DATAGRAM];
     let mut rejects = RejectLog::default();
     loop {
-        let length = match socket.recv_from(&mut buffer).await {
-            Ok((length, _)) => length,
-            Err(error) => {
-                warn!("sensor socket: {error}");
-                tokio::time::sleep(Duration::from_millis(100)).await;
-                continue;
-            }
-        };
+        let (length, _) = receive(&socket, &mut buffer, "sensor").await;
         match LolaState::from_msgpack(&buffer[..length]) {
             Ok(state) => take_sample(&state, started, &mut detector, &steadiness, &triggers),
             Err(error) => {
@@ -278,14 +277,7 @@ pub async fn control(socket: Datagram, triggers: Triggers, status: Arc<Status>) 
     let mut buffer = vec![0u8; MAX_DATAGRAM];
     let mut rejects = RejectLog::default();
     loop {
-        let (length, peer) = match socket.recv_from(&mut buffer).await {
-            Ok(received) => received,
-            Err(error) => {
-                warn!("control socket: {error}");
-                tokio::time::sleep(Duration::from_millis(100)).await;
-                continue;
-            }
-        };
+        let (length, peer) = receive(&socket, &mut buffer, "control").await;
         let answer = match ControlRequest::parse(&buffer[..length]) {
             Ok(ControlRequest::Relocalise(request)) => {
                 match triggers.fire(TriggerKind::Request, request.reason, request.head_yaw) {

@@ -11,7 +11,7 @@ use tracing::{info, warn};
 
 use super::config::BurstConfig;
 use super::publish::Publisher;
-use super::source::{CaptureRequest, CapturedFrame, FrameSource, unix_now};
+use super::source::{CaptureRequest, CapturedFrame, FrameSource, sleep_unless_stopped, unix_now};
 use super::status::Status;
 use super::triggers::{Steadiness, TriggerEvent};
 use crate::protocol::message::{
@@ -60,7 +60,7 @@ impl Worker {
             let mut batch = vec![first];
             if let Some(last) = last_burst {
                 let ready = last + Duration::from_millis(self.burst.min_interval_ms);
-                if !self.sleep_until(ready) {
+                if !sleep_unless_stopped(&self.stop, ready) {
                     break;
                 }
             }
@@ -87,17 +87,6 @@ impl Worker {
             let refused = self.publisher.publish(&message);
             self.status.update(|report| report.publish_errors += refused);
         }
-    }
-
-    /// Sleeps until `until`; false if the daemon is stopping.
-    fn sleep_until(&self, until: Instant) -> bool {
-        while Instant::now() < until {
-            if self.stop.load(Ordering::Relaxed) {
-                return false;
-            }
-            std::thread::sleep((until - Instant::now()).min(Duration::from_millis(50)));
-        }
-        !self.stop.load(Ordering::Relaxed)
     }
 
     /// Waits until the sensors say the robot stands still, they go quiet, or the settle timeout.

@@ -75,20 +75,10 @@ pub struct CaptureRequest<'a> {
 }
 
 impl CaptureRequest<'_> {
-    /// Sleeps until `until` in short steps, so a shutdown is noticed; false (at once, or at the
-    /// deadline) if stopped or `until` lies past the deadline.
+    /// Sleeps until `until`, noticing a shutdown; false (at once, or at the deadline) if stopped or
+    /// `until` lies past the deadline.
     pub fn sleep_until(&self, until: Instant) -> bool {
-        let wake = until.min(self.deadline);
-        loop {
-            if self.stopped() {
-                return false;
-            }
-            let now = Instant::now();
-            if now >= wake {
-                return until <= self.deadline;
-            }
-            std::thread::sleep((wake - now).min(Duration::from_millis(50)));
-        }
+        sleep_unless_stopped(self.stop, until.min(self.deadline)) && until <= self.deadline
     }
 
     /// Whether the daemon is shutting down.
@@ -102,6 +92,21 @@ pub trait FrameSource: Send {
     /// Takes up to `request.count` frames, `request.spacing` apart, starting now. Returns at least
     /// one frame or an error saying why there is none; fewer than asked when the deadline passed.
     fn capture(&mut self, request: &CaptureRequest<'_>) -> Result<Vec<CapturedFrame>, SourceError>;
+}
+
+/// Sleeps until `until` in steps of at most 50 ms, so that a shutdown is noticed; false if `stop`
+/// was set.
+pub fn sleep_unless_stopped(stop: &AtomicBool, until: Instant) -> bool {
+    loop {
+        if stop.load(Ordering::Relaxed) {
+            return false;
+        }
+        let now = Instant::now();
+        if now >= until {
+            return true;
+        }
+        std::thread::sleep((until - now).min(Duration::from_millis(50)));
+    }
 }
 
 /// Now, Unix seconds.
