@@ -6,7 +6,7 @@
 //! {"status": {}}
 //! ```
 
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
 /// Datagrams longer than this are dropped before parsing.
@@ -15,7 +15,7 @@ pub const MAX_REQUEST_BYTES: usize = 4096;
 pub const MAX_REASON_CHARS: usize = 200;
 
 /// A request on the control socket.
-#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case", deny_unknown_fields)]
 pub enum ControlRequest {
     /// Relocalise now.
@@ -25,19 +25,19 @@ pub enum ControlRequest {
 }
 
 /// `{"relocalise": {...}}`.
-#[derive(Clone, Debug, Default, PartialEq, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RelocaliseRequest {
     /// Why, for the log and the published message.
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub reason: Option<String>,
     /// The head yaw the frames will be taken with, radians (else the sensors' or the config's).
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub head_yaw: Option<f64>,
 }
 
 /// `{"status": {}}`.
-#[derive(Clone, Debug, Default, PartialEq, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct StatusRequest {}
 

@@ -1,0 +1,145 @@
+//! The clients teams integrate, each against a running daemon: the Rust `relocd::client` module, the
+//! Python and C++ clients in `examples/` (the C++ one compiled here with g++), and the Python and C++
+//! examples that forward a frame and a trigger.
+
+use std::net::UdpSocket;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+use std::time::Duration;
+
+use relocd::client::{Address, Control, Subscriber};
+use relocd::protocol::message::TriggerKind;
+
+use crate::harness::{Daemon, sample_yuyv};
+
+fn example(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("examples").join(name)
+}
+
+/// A UDP port nothing listens on right now, for a client to bind.
+fn free_udp_port() -> u16 {
+    UdpSocket::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
+}
+
+/// Compiles an example with g++ as a team would (C++17, warnings are errors); returns the binary.
+fn compile_cpp(source: &str, out: &Path) -> PathBuf {
+    let binary = out.join(source.trim_end_matches(".cpp"));
+    let output = Command::new("g++")
+        .args(["-std=c++17", "-O1", "-Wall", "-Wextra", "-Wpedantic", "-Werror", "-o"])
+        .arg(&binary)
+        .arg(example(source))
+        .output()
+        .expect("g++ runs (install g++ to test the C++ examples)");
+    assert!(output.status.success(), "g++ {source}: {}", String::from_utf8_lossy(&output.stderr));
+    binary
+}
+
+fn succeeded(output: &Output) -> String {
+    let stdout = String::from_utf8_lossy(&output.stdout).into_owned();
+    assert!(
+        output.status.success(),
+        "{}\nstdout: {stdout}\nstderr: {}",
+        output.status,
+        String::from_utf8_lossy(&output.stderr)
+    );
+    stdout
+}
+
+#[test]
+fn the_rust_client_asks_for_a_relocalisation_and_receives_its_answer() {
+    let mut subscriber = Subscriber::bind(&"udp:127.0.0.1:0".parse().unwrap()).unwrap();
+    let listen = format!("udp:{}", subscriber.local_udp_address().unwrap());
+    let daemon =
+        Daemon::start("replay:{sample}", &["--burst", "2", "--encoding", "msgpack", "--publish", &listen]);
+
+    let control = Control::connect(&Address::Unix(daemon.socket("control"))).unwrap();
+    let trigger = control.relocalise(Some("rust client"), Some(0.0)).unwrap();
+    let message = subscriber.recv_answer(trigger, Duration::from_secs(30)).unwrap();
+    assert_eq!(message.triggers[0].kind, TriggerKind::Request);
+    assert_eq!(message.triggers[0].reason.as_deref(), Some("rust client"));
+    assert_eq!(message.hypotheses.len(), 2, "a half-point model's symmetric pair");
+    let total: f64 = message.hypotheses.iter().map(|h| h.weight).sum();
+    assert!((total - 1.0).abs() < 1e-6, "{:?}", message.hypotheses);
+    assert_eq!(control.status().unwrap()["published"], 1);
+    daemon.stop();
+}
+
+#[test]
+fn the_python_client_prints_the_best_hypothesis() {
+    let port = free_udp_port();
+    let daemon =
+        Daemon::start("replay:{sample}", &["--burst", "2", "--publish", &format!("udp:127.0.0.1:{port}")]);
+    let output = Command::new("python3")
+        .arg(example("relocd_client.py"))
+        .args(["--listen", &format!("udp:127.0.0.1:{port}"), "--request", "python client", "--timeout", "30"])
+        .args(["--control", &format!("unix:{}", daemon.socket("control").display())])
+        .output()
+        .expect("python3 runs");
+    let stdout = succeeded(&output);
+    assert!(stdout.starts_with("seq 1 triggers [1 request]: best x="), "{stdout}");
+    assert!(stdout.contains("(2 hypotheses)"), "{stdout}");
+    daemon.stop();
+}
+
+#[test]
+fn the_cpp_client_compiles_and_prints_the_best_hypothesis() {
+    let build = tempfile::tempdir().unwrap();
+    let print_best = compile_cpp("relocd_print_best.cpp", build.path());
+    let port = free_udp_port();
+    let daemon =
+        Daemon::start("replay:{sample}", &["--burst", "2", "--publish", &format!("udp:127.0.0.1:{port}")]);
+    let output = Command::new(print_best)
+        .args(["--listen", &format!("udp:127.0.0.1:{port}"), "--request", "cpp", "--timeout-ms", "30000"])
+        .args(["--control", &format!("unix:{}", daemon.socket("control").display())])
+        .output()
+        .unwrap();
+    let stdout = succeeded(&output);
+    assert!(stdout.starts_with("seq 1 triggers [1 request]: best x="), "{stdout}");
+    assert!(stdout.contains("(2 hypotheses)"), "{stdout}");
+    daemon.stop();
+}
+
+/// Runs a frame sender beside a daemon on forwarded frames; the published message must answer the
+/// trigger it printed, with frames it sent.
+fn forward_a_frame_and_a_trigger(sender: impl FnOnce(&Daemon, &Path) -> Command) {
+    let daemon = Daemon::start("frames:unix:{dir}/frames", &["--burst", "2"]);
+    let frame = daemon.socket("frame.yuyv");
+    std::fs::write(&frame, sample_yuyv().as_bytes()).unwrap();
+    let child = sender(&daemon, &frame).stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap();
+    let message = daemon.message();
+    let stdout = succeeded(&child.wait_with_output().unwrap());
+    let trigger: u64 = stdout.trim().parse().expect("the sender prints the trigger id");
+    assert_eq!(message.triggers[0].id, trigger);
+    assert_eq!(message.frames.used, 2, "{:?}", message.failure);
+    assert_eq!(message.hypotheses.len(), 2);
+    daemon.stop();
+}
+
+#[test]
+fn the_python_sender_forwards_a_frame_and_a_trigger() {
+    forward_a_frame_and_a_trigger(|daemon, frame| {
+        let mut command = Command::new("python3");
+        command
+            .arg(example("relocd_send_frame.py"))
+            .args(["--yuyv", frame.to_str().unwrap(), "--seconds", "1.5", "--fps", "20"])
+            .args(["--frames", daemon.socket("frames").to_str().unwrap()])
+            .args(["--control", &format!("unix:{}", daemon.socket("control").display())])
+            .args(["--camera", "0.5,0.3,0.0,0.0"]);
+        command
+    });
+}
+
+#[test]
+fn the_cpp_sender_forwards_a_frame_and_a_trigger() {
+    let build = tempfile::tempdir().unwrap();
+    let send_frame = compile_cpp("relocd_send_frame.cpp", build.path());
+    forward_a_frame_and_a_trigger(|daemon, frame| {
+        let mut command = Command::new(&send_frame);
+        command
+            .arg(frame)
+            .args(["640", "480"])
+            .arg(daemon.socket("frames"))
+            .args([&format!("unix:{}", daemon.socket("control").display()), "1.5"]);
+        command
+    });
+}
