@@ -392,6 +392,7 @@ fn replay(args: ReplayArgs) -> anyhow::Result<()> {
     info!(
         model = %contract.model_id,
         representation = %contract.representation,
+        isa = %relocaliser::kernel_isa(),
         recording = %directory.display(),
         frames = recording.records().len(),
         "replaying"

@@ -48,7 +48,12 @@ pub fn run(config: Config) -> anyhow::Result<()> {
         )?,
     };
     let contract = model.contract();
-    info!("model {} ({})", contract.model_id, contract.representation);
+    info!(
+        "model {} ({}), tract kernels for {}",
+        contract.model_id,
+        contract.representation,
+        relocaliser::kernel_isa()
+    );
     let status = Arc::new(Status::new(config.source.to_string(), contract.model_id.clone()));
     let publisher = Publisher::new(config.publish.targets.clone(), config.publish.encoding)
         .context("cannot create the publishing sockets")?;

@@ -12,7 +12,7 @@ pub mod prior;
 pub use contract::{ContractError, InputSpec, ModelContract};
 pub use decode::{DecodeError, Prediction, RawOutput};
 pub use fusion::{BurstEstimate, FusedHypothesis, FusionError, PoseSigma, fuse};
-pub use model::{Model, ModelError};
+pub use model::{Model, ModelError, kernel_isa};
 pub use pipeline::{Relocalisation, RelocaliseError, Relocaliser, Timings};
 pub use preprocess::{InputTensor, PreprocessError, preprocess};
 pub use prior::PlacementPrior;

@@ -1,0 +1,87 @@
+#!/usr/bin/env bash
+# Proves the Nao binaries run on the robots' CPUs, which no development machine has: builds the
+# static Nao binary (deploy/build-nao.sh), runs it on the sample recording natively and under Debian's
+# qemu-user with an Atom CPU model, and checks that
+#   1. it runs there, and tract fell back to its generic kernels (the log's `isa=`),
+#   2. its hypotheses equal the native run's,
+#   3. AVX2 code dies there with SIGILL (a negative control: the emulated CPU really lacks AVX).
+#
+#   deploy/atom-check.sh [v6] [v5]     (default: v6; CI runs v6)
+#
+# V6: Intel Atom E3845 (Silvermont: SSE4.2, no AVX/FMA/XSAVE) as a qemu CPU model (REFERENCE.md).
+# V5: 32-bit Atom N270-class, `qemu-i386 -cpu n270`.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+robots=("$@")
+[ ${#robots[@]} -gt 0 ] || robots=(v6)
+
+ATOM_E3845='Nehalem,family=6,model=55,stepping=8,+movbe,+aes,+pclmulqdq,+rdrand,+erms,model-id=Intel(R) Atom(TM) CPU E3845 @ 1.91GHz'
+
+if ! command -v qemu-x86_64 >/dev/null || ! command -v qemu-i386 >/dev/null; then
+    sudo=""
+    [ "$(id -u)" -eq 0 ] || sudo="sudo"
+    $sudo apt-get install -y -q qemu-user >/dev/null 2>&1 \
+        || { $sudo apt-get update -q >/dev/null && $sudo apt-get install -y -q qemu-user >/dev/null; }
+fi
+
+scratch="$(mktemp -d)"
+trap 'rm -rf "$scratch"' EXIT
+
+# What a replay line says about the pose, without its timings: the part that must not change.
+hypotheses() {
+    python3 -c '
+import json, sys
+for line in sys.stdin:
+    record = json.loads(line)
+    record.pop("timings", None)
+    print(json.dumps(record, sort_keys=True))
+' < "$1"
+}
+
+fail() { echo "atom-check: FAIL: $*" >&2; exit 1; }
+
+echo "== negative control: AVX2 code under the emulated Atom"
+cat > "$scratch/avx2.c" <<'C'
+/* One AVX2 instruction (vpaddd on 256-bit registers), as tract's AVX2 kernels use. */
+int main(void) {
+    __asm__ volatile("vpaddd %%ymm0, %%ymm0, %%ymm0" ::: "xmm0");
+    return 0;
+}
+C
+gcc -O1 -static -o "$scratch/avx2" "$scratch/avx2.c"
+"$scratch/avx2" || fail "the AVX2 control program does not run natively: this check needs an AVX2 host"
+set +e
+qemu-x86_64 -cpu "$ATOM_E3845" "$scratch/avx2" >/dev/null 2>&1
+status=$?
+set -e
+[ "$status" -eq 132 ] || fail "AVX2 code exited with $status under the Atom model, expected 132 (SIGILL)"
+echo "AVX2 code dies with SIGILL (exit 132): the emulated CPU has no AVX2"
+
+for robot in "${robots[@]}"; do
+    case "$robot" in
+        v6) emulate=(qemu-x86_64 -cpu "$ATOM_E3845") expected_isa="x86_64" ;;
+        v5) emulate=(qemu-i386 -cpu n270) expected_isa="generic" ;;
+        *) echo "usage: $0 [v6] [v5]" >&2; exit 2 ;;
+    esac
+    echo "== Nao $robot"
+    binary="$(deploy/build-nao.sh "$robot")"
+    RELOCD_LOG=info "$binary" replay > "$scratch/native.jsonl" 2> "$scratch/native.log" \
+        || fail "$robot native run: $(cat "$scratch/native.log")"
+    started=$(date +%s)
+    RELOCD_LOG=info "${emulate[@]}" "$binary" replay > "$scratch/atom.jsonl" 2> "$scratch/atom.log" \
+        || fail "$robot under ${emulate[*]:0:3}: exit $?: $(tail -5 "$scratch/atom.log")"
+    echo "ran under ${emulate[0]} -cpu ${emulate[2]%%,*}… in $(( $(date +%s) - started )) s"
+
+    isa="$(grep -o 'isa=[^ ]*' "$scratch/atom.log" | head -1)"
+    [ "$isa" = "isa=$expected_isa" ] || fail "tract's kernels under the Atom model: '$isa', expected isa=$expected_isa"
+    echo "tract kernels: $isa (generic; natively: $(grep -o 'isa=[^ ]*' "$scratch/native.log" | head -1))"
+
+    lines=$(wc -l < "$scratch/atom.jsonl")
+    [ "$lines" -eq 24 ] || fail "$robot relocalised $lines of the 24 sample frames"
+    if ! diff <(hypotheses "$scratch/native.jsonl") <(hypotheses "$scratch/atom.jsonl") > "$scratch/diff"; then
+        fail "$robot: hypotheses differ between the native run and the Atom model: $(head -c 2000 "$scratch/diff")"
+    fi
+    echo "all $lines frames: hypotheses equal the native run's"
+done
+echo "atom-check: OK (${robots[*]})"

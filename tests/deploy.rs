@@ -1,0 +1,126 @@
+//! The deploy files: the installer's dry run prints exactly the commands a real run executes (run
+//! here against stand-in `ssh` and `rsync` that only log), a dry run executes nothing, and the
+//! systemd unit starts what the installer installs.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use relocd::daemon::config::Config;
+
+fn repository() -> &'static Path {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// A directory with stand-in `ssh` and `rsync` that append their command line, quoted as the
+/// installer prints it, to `calls.log` beside them.
+fn stand_in_tools() -> tempfile::TempDir {
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("calls.log");
+    let script = format!(
+        r#"#!/usr/bin/env bash
+quote() {{
+    case "$1" in
+        '' | *[!A-Za-z0-9_./:@=,+-]*) printf "'%s'" "${{1//\'/\'\\\'\'}}" ;;
+        *) printf '%s' "$1" ;;
+    esac
+}}
+{{ printf '+ %s' "$(basename "$0")"; for word in "$@"; do printf ' %s' "$(quote "$word")"; done; printf '\n'; }} >> {log}
+"#,
+        log = log.display()
+    );
+    for tool in ["ssh", "rsync"] {
+        let path = dir.path().join(tool);
+        std::fs::write(&path, &script).unwrap();
+        Command::new("chmod").arg("+x").arg(&path).status().unwrap();
+    }
+    dir
+}
+
+fn install(tools: &Path, args: &[&str]) -> Output {
+    let path = format!("{}:{}", tools.display(), std::env::var("PATH").unwrap_or_default());
+    Command::new(repository().join("deploy/install.sh")).args(args).env("PATH", path).output().unwrap()
+}
+
+fn stdout(output: &Output) -> String {
+    assert!(output.status.success(), "{}: {}", output.status, String::from_utf8_lossy(&output.stderr));
+    String::from_utf8(output.stdout.clone()).unwrap()
+}
+
+fn commands(text: &str) -> Vec<&str> {
+    text.lines().filter(|line| line.starts_with("+ ")).collect()
+}
+
+#[test]
+fn the_dry_run_prints_what_the_installer_runs_and_runs_nothing() {
+    let tools = stand_in_tools();
+    let binary = tools.path().join("relocd");
+    std::fs::write(&binary, "a binary").unwrap();
+    let args = ["nao@10.0.0.42", "--binary", binary.to_str().unwrap(), "--after", "hulk.service"];
+
+    let dry = stdout(&install(tools.path(), &[&args[..], &["--dry-run"]].concat()));
+    assert!(!tools.path().join("calls.log").exists(), "a dry run executes nothing");
+    let real = install(tools.path(), &args);
+    stdout(&real);
+    let executed = std::fs::read_to_string(tools.path().join("calls.log")).unwrap();
+    assert_eq!(commands(&dry), commands(&executed));
+
+    let dry = commands(&dry).join("\n");
+    for expected in [
+        &format!("rsync -t --chmod=F755 {} nao@10.0.0.42:/home/nao/relocd/relocd", binary.display()),
+        "models/squeezenet-half-point.int8.onnx nao@10.0.0.42:/home/nao/relocd/model.onnx",
+        "--ignore-existing deploy/relocd.toml nao@10.0.0.42:/home/nao/relocd/relocd.toml",
+        "sudo install -m 0644 /home/nao/relocd/relocd.service /etc/systemd/system/relocd.service",
+        "After=%s",
+        "systemctl enable relocd.service && sudo systemctl restart relocd.service",
+    ] {
+        assert!(dry.contains(expected), "{expected:?} missing from\n{dry}");
+    }
+}
+
+#[test]
+fn the_installer_builds_unless_given_a_binary_and_uninstalls() {
+    let tools = stand_in_tools();
+    let dry = stdout(&install(tools.path(), &["10.0.0.7", "--robot", "v5", "--dry-run"]));
+    let dry = commands(&dry);
+    assert_eq!(dry[0], "+ deploy/build-nao.sh v5");
+    assert!(dry[2].contains("i686-unknown-linux-gnu/release/relocd nao@10.0.0.7:"), "{dry:?}");
+    assert!(!dry.join("\n").contains("After="), "no ordering drop-in without --after");
+
+    let root = stdout(&install(tools.path(), &["root@10.0.0.7", "--uninstall", "--dry-run"]));
+    assert!(root.contains("+ ssh root@10.0.0.7 'systemctl disable --now relocd.service || true'"), "{root}");
+    assert!(root.contains("rm -rf /etc/systemd/system/relocd.service /etc/systemd/system/relocd.service.d"));
+    assert!(!root.contains("sudo"), "root needs no sudo");
+    assert!(!tools.path().join("calls.log").exists());
+
+    for bad in [&[][..], &["10.0.0.7", "--robot", "v7"], &["10.0.0.7", "--after", "x; reboot"], &["a", "b"]] {
+        let output = install(tools.path(), bad);
+        assert_eq!(output.status.code(), Some(2), "{bad:?}: {}", String::from_utf8_lossy(&output.stderr));
+    }
+    let missing = install(tools.path(), &["10.0.0.7", "--binary", "/no/such/relocd", "--dry-run"]);
+    assert!(!missing.status.success());
+    assert!(String::from_utf8_lossy(&missing.stderr).contains("/no/such/relocd: no such file"));
+}
+
+#[test]
+fn the_unit_runs_the_installed_files_as_nao_at_low_priority() {
+    let unit = std::fs::read_to_string(repository().join("deploy/relocd.service")).unwrap();
+    let value = |key: &str| {
+        unit.lines()
+            .find_map(|line| line.strip_prefix(key)?.strip_prefix('='))
+            .unwrap_or_else(|| panic!("relocd.service has no {key}="))
+    };
+    assert_eq!(
+        value("ExecStart"),
+        "/home/nao/relocd/relocd run --config /home/nao/relocd/relocd.toml --model /home/nao/relocd/model.onnx"
+    );
+    assert_eq!(value("User"), "nao");
+    assert_eq!(value("Restart"), "on-failure");
+    assert_eq!(value("Nice"), Config::default().process.nice.to_string(), "the unit and relocd agree");
+    assert!(value("After").contains(r"dev-video\x2dtop.device"), "after the top camera");
+
+    // The files the unit names are the ones the installer copies.
+    let dry = stdout(&install(&PathBuf::from("/nonexistent"), &["robot", "--binary", "Cargo.toml", "--dry-run"]));
+    for file in ["/home/nao/relocd/relocd", "/home/nao/relocd/relocd.toml", "/home/nao/relocd/model.onnx"] {
+        assert!(dry.contains(&format!(":{file}\n")), "the installer does not copy {file}:\n{dry}");
+    }
+}
