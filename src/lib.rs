@@ -10,6 +10,7 @@ pub mod frame;
 pub mod geometry;
 pub mod posture;
 pub mod protocol;
+pub mod record;
 pub mod recording;
 pub mod relocaliser;
 pub mod replay;

@@ -14,6 +14,7 @@ use tracing::info;
 use relocd::daemon::config::{Config, Listen, SensorInput, SourceSpec, Target};
 use relocd::geometry::{CameraIntrinsics, FieldDimensions, FieldModel, Representation};
 use relocd::protocol::message::Encoding;
+use relocd::record::RecordOptions;
 use relocd::recording::{FrameFormat, Recording};
 use relocd::relocaliser::{self, Model, PlacementPrior, Relocaliser};
 use relocd::replay::ReplayOptions;
@@ -44,6 +45,35 @@ enum Command {
     /// Run the daemon: relocalise on a penalty return, a fall, a pick-up or a request, and publish the
     /// hypotheses. Flags override the config file's keys.
     Run(RunArgs),
+    /// Record frames from the camera (V4L2) or the forwarded-frame socket into a recording, with
+    /// capture times and camera poses, to replay later; stops after --count frames, --seconds, or
+    /// Ctrl-C.
+    Record(RecordArgs),
+}
+
+#[derive(Debug, clap::Args)]
+struct RecordArgs {
+    /// Directory to write the recording to (created; must not already hold one).
+    #[arg(long)]
+    out: PathBuf,
+    /// Frame source: v4l:DEVICE, frames:unix:PATH (a team's process forwards frames) or sim.
+    #[arg(long, default_value = "v4l:/dev/video-top")]
+    source: SourceSpec,
+    /// Stop after this many frames.
+    #[arg(long, default_value_t = 100)]
+    count: u64,
+    /// Stop after this many seconds.
+    #[arg(long)]
+    seconds: Option<f64>,
+    /// Frames kept per second (the camera runs at its own rate).
+    #[arg(long, default_value_t = 5.0)]
+    fps: f64,
+    /// Frame file format: raw YUYV keeps the camera's bytes; PNG and JPEG are smaller.
+    #[arg(long, value_enum, default_value_t = FormatArg::Yuyv)]
+    format: FormatArg,
+    /// TOML config whose [camera] section sets the V4L2 size and rate (see deploy/relocd.toml).
+    #[arg(long, short)]
+    config: Option<PathBuf>,
 }
 
 #[derive(Debug, clap::Args)]
@@ -217,6 +247,16 @@ enum FormatArg {
     Yuyv,
 }
 
+impl From<FormatArg> for FrameFormat {
+    fn from(format: FormatArg) -> Self {
+        match format {
+            FormatArg::Png => FrameFormat::Png,
+            FormatArg::Jpeg => FrameFormat::Jpeg,
+            FormatArg::Yuyv => FrameFormat::Yuyv,
+        }
+    }
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
@@ -226,6 +266,7 @@ fn main() -> ExitCode {
                 Command::Render(args) => render(args),
                 Command::Replay(args) => replay(args),
                 Command::Field(args) => field(args),
+                Command::Record(args) => record(args),
                 Command::Run(_) => unreachable!("handled above"),
             },
             Err(error) => Err(error),
@@ -275,6 +316,42 @@ fn run(args: RunArgs, log_level: Option<String>) -> anyhow::Result<()> {
     config.validate()?;
     init_logging(&config.log_level)?;
     relocd::daemon::run(config)
+}
+
+fn record(args: RecordArgs) -> anyhow::Result<()> {
+    let config = match &args.config {
+        Some(path) => Config::load(path)?,
+        None => Config::default(),
+    };
+    config.validate()?;
+    let duration = match args.seconds {
+        Some(seconds) if !(seconds > 0.0 && seconds <= 86_400.0) => {
+            bail!("--seconds {seconds}: expected a duration in (0, 86400]")
+        }
+        seconds => seconds.map(std::time::Duration::from_secs_f64),
+    };
+    let options = RecordOptions {
+        source: args.source,
+        out: args.out,
+        count: args.count,
+        duration,
+        fps: args.fps,
+        format: args.format.into(),
+        camera: config.camera,
+    };
+    let progress = ProgressBar::new(options.count).with_style(
+        ProgressStyle::with_template("{elapsed_precise} [{bar:40}] {pos}/{len} frames")
+            .expect("valid progress template")
+            .progress_chars("=> "),
+    );
+    let summary = relocd::record::record(&options, |frames| progress.set_position(frames))?;
+    progress.finish_and_clear();
+    info!(frames = summary.frames, seconds = summary.seconds, rejected = summary.rejected, "recorded");
+    println!(
+        "{}",
+        serde_json::json!({ "recording": options.out, "frames": summary.frames, "seconds": summary.seconds })
+    );
+    Ok(())
 }
 
 fn load_field(path: Option<&Path>) -> anyhow::Result<FieldModel> {
@@ -338,11 +415,7 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
             ..Randomisation::default()
         },
         supersample: args.supersample,
-        format: match args.format {
-            FormatArg::Png => FrameFormat::Png,
-            FormatArg::Jpeg => FrameFormat::Jpeg,
-            FormatArg::Yuyv => FrameFormat::Yuyv,
-        },
+        format: args.format.into(),
         count: args.count,
         seed: args.seed,
         burst: args.burst.into(),

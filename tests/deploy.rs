@@ -119,7 +119,8 @@ fn the_unit_runs_the_installed_files_as_nao_at_low_priority() {
     assert!(value("After").contains(r"dev-video\x2dtop.device"), "after the top camera");
 
     // The files the unit names are the ones the installer copies.
-    let dry = stdout(&install(&PathBuf::from("/nonexistent"), &["robot", "--binary", "Cargo.toml", "--dry-run"]));
+    let dry =
+        stdout(&install(&PathBuf::from("/nonexistent"), &["robot", "--binary", "Cargo.toml", "--dry-run"]));
     for file in ["/home/nao/relocd/relocd", "/home/nao/relocd/relocd.toml", "/home/nao/relocd/model.onnx"] {
         assert!(dry.contains(&format!(":{file}\n")), "the installer does not copy {file}:\n{dry}");
     }

@@ -1,7 +1,9 @@
 //! `relocd run` end to end: a real daemon on loopback sockets, real GameController packets, LoLA
 //! sensor messages, control requests and forwarded frames; the published messages are decoded with
-//! the library's reference decoder, and the example clients in `examples/` talk to the daemon.
+//! the library's reference decoder, and the example clients in `examples/` talk to the daemon;
+//! `relocd record` takes frames from the same sockets.
 
 mod clients;
 mod harness;
+mod record;
 mod triggers;

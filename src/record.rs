@@ -1,0 +1,231 @@
+//! `relocd record`: frames from the robot's camera (V4L2), the forwarded-frame socket or the
+//! simulator into a recording (`crate::recording`), with capture times (Unix seconds) and the camera
+//! pose where the source knows it, so that teams can build test sets in their own halls and replay
+//! them with `relocd replay` or `relocd run --source replay:DIR`.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, bail};
+use tokio::sync::oneshot;
+use tracing::{info, warn};
+
+use crate::daemon::config::{CameraConfig, SourceSpec};
+use crate::daemon::sockets;
+use crate::daemon::source::forwarded::{self, ForwardedSource, FrameQueue};
+use crate::daemon::source::sim::SimSource;
+use crate::daemon::source::{CaptureRequest, FrameSource, SourceError};
+use crate::daemon::status::Status;
+use crate::geometry::{FieldDimensions, FieldModel};
+use crate::recording::{FrameFormat, FrameRecord, RecordingWriter};
+
+/// How long one wait for frames may last before the recorder says that none come.
+const PATIENCE: Duration = Duration::from_secs(2);
+
+/// What to record.
+#[derive(Clone, Debug)]
+pub struct RecordOptions {
+    /// `v4l:DEVICE`, `frames:unix:PATH` or `sim`.
+    pub source: SourceSpec,
+    /// The recording directory to create.
+    pub out: PathBuf,
+    /// Stop after this many frames.
+    pub count: u64,
+    /// Stop after this long, if given.
+    pub duration: Option<Duration>,
+    /// Frames kept per second (the camera may deliver more).
+    pub fps: f64,
+    /// How frame files are stored.
+    pub format: FrameFormat,
+    /// V4L2 size and rate, and the simulator's size.
+    pub camera: CameraConfig,
+}
+
+/// What was recorded.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RecordSummary {
+    /// Frames written.
+    pub frames: u64,
+    /// From the first frame to the last, seconds.
+    pub seconds: f64,
+    /// Forwarded frames refused (a bad header), if the source was the frame socket.
+    pub rejected: u64,
+}
+
+/// Records until `options.count` frames, `options.duration` or a SIGINT/SIGTERM, whichever comes
+/// first; `on_frame` is called after each frame is written.
+pub fn record(options: &RecordOptions, mut on_frame: impl FnMut(u64)) -> anyhow::Result<RecordSummary> {
+    if !(options.fps > 0.0 && options.fps <= 60.0) {
+        bail!("--fps {}: expected frames per second in (0, 60]", options.fps);
+    }
+    let status = Arc::new(Status::new(options.source.to_string(), String::new()));
+    let background = Background::start(&options.source, status.clone())?;
+    let mut source = open_source(&options.source, &options.camera, background.queue.clone())?;
+    let mut writer = RecordingWriter::create(&options.out)?;
+    info!(source = %options.source, out = %options.out.display(), "recording");
+
+    let spacing = Duration::from_secs_f64(1.0 / options.fps);
+    let started = Instant::now();
+    let end = options.duration.map(|duration| started + duration);
+    let (mut frames, mut first, mut last) = (0u64, None, 0.0);
+    while frames < options.count && end.is_none_or(|end| Instant::now() < end) {
+        let batch = (options.count - frames).min(options.fps.ceil() as u64);
+        let deadline = Instant::now() + spacing * batch as u32 + PATIENCE;
+        let request = CaptureRequest {
+            count: batch as usize,
+            spacing,
+            deadline: end.map_or(deadline, |end| deadline.min(end)),
+            stop: &background.stop,
+        };
+        let captured = match source.capture(&request) {
+            Ok(captured) => captured,
+            Err(SourceError::Timeout(waited)) => {
+                warn!("no frame from {} for {:.1} s", options.source, waited.as_secs_f64());
+                continue;
+            }
+            Err(SourceError::Stopped) => break,
+            Err(error) => return Err(error).context("recording stopped"),
+        };
+        for frame in captured {
+            let (width, height) = frame.frame.dimensions();
+            let record = FrameRecord {
+                file: format!("{frames:06}.{}", options.format.extension()),
+                t: frame.taken,
+                pose: frame.truth,
+                camera: frame.camera,
+                width: Some(width),
+                height: Some(height),
+            };
+            writer.write_frame(&record, &frame.frame)?;
+            first.get_or_insert(frame.taken);
+            last = frame.taken;
+            frames += 1;
+            on_frame(frames);
+        }
+        if background.stop.load(Ordering::Relaxed) {
+            break;
+        }
+    }
+    Ok(RecordSummary {
+        frames,
+        seconds: first.map_or(0.0, |first| last - first),
+        rejected: status.snapshot().rejected.frames,
+    })
+}
+
+fn open_source(
+    spec: &SourceSpec,
+    camera: &CameraConfig,
+    queue: Option<Arc<FrameQueue>>,
+) -> anyhow::Result<Box<dyn FrameSource>> {
+    match (spec, queue) {
+        (SourceSpec::Frames(_), Some(queue)) => Ok(Box::new(ForwardedSource::new(queue))),
+        (SourceSpec::Sim, _) => {
+            let field = FieldModel::new(FieldDimensions::spl_2025());
+            Ok(Box::new(SimSource::new(field, camera.width, camera.height, 1)))
+        }
+        (SourceSpec::V4l(device), _) => v4l_source(device, camera),
+        (SourceSpec::Replay(_), _) => bail!("a recording is already recorded: copy its directory instead"),
+        (SourceSpec::Frames(_), None) => unreachable!("Background::start listens for forwarded frames"),
+    }
+}
+
+#[cfg(feature = "v4l")]
+fn v4l_source(device: &std::path::Path, camera: &CameraConfig) -> anyhow::Result<Box<dyn FrameSource>> {
+    let source = crate::daemon::source::v4l::V4lSource::new(
+        device.to_path_buf(),
+        camera.width,
+        camera.height,
+        camera.fps,
+        true,
+    );
+    Ok(Box::new(source))
+}
+
+#[cfg(not(feature = "v4l"))]
+fn v4l_source(device: &std::path::Path, _: &CameraConfig) -> anyhow::Result<Box<dyn FrameSource>> {
+    bail!(
+        "v4l:{}: this relocd was built without V4L2 capture; rebuild with `--features v4l` \
+         (deploy/build-nao.sh does)",
+        device.display()
+    )
+}
+
+/// A thread with a small tokio runtime: turns SIGINT/SIGTERM into `stop`, and listens for forwarded
+/// frames when the source is the frame socket. Stopped and joined when dropped.
+struct Background {
+    stop: Arc<AtomicBool>,
+    queue: Option<Arc<FrameQueue>>,
+    shutdown: Option<oneshot::Sender<()>>,
+    thread: Option<JoinHandle<()>>,
+}
+
+impl Background {
+    fn start(source: &SourceSpec, status: Arc<Status>) -> anyhow::Result<Self> {
+        let stop = Arc::new(AtomicBool::new(false));
+        let frames = match source {
+            SourceSpec::Frames(path) => Some((path.clone(), Arc::new(FrameQueue::new(8)))),
+            _ => None,
+        };
+        let queue = frames.as_ref().map(|(_, queue)| queue.clone());
+        let (shutdown, shutdown_received) = oneshot::channel();
+        let (ready, is_ready) = std::sync::mpsc::channel::<anyhow::Result<()>>();
+        let flag = stop.clone();
+        let thread = std::thread::Builder::new().name("record-io".into()).spawn(move || {
+            let runtime = match tokio::runtime::Builder::new_current_thread().enable_all().build() {
+                Ok(runtime) => runtime,
+                Err(error) => return drop(ready.send(Err(error.into()))),
+            };
+            runtime.block_on(async move {
+                let signals = signals().context("cannot handle SIGINT/SIGTERM");
+                let listener = match &frames {
+                    Some((path, _)) => sockets::bind_stream(path)
+                        .map(Some)
+                        .with_context(|| format!("cannot listen for forwarded frames on {}", path.display())),
+                    None => Ok(None),
+                };
+                let (mut terminate, mut interrupt, listener) = match (signals, listener) {
+                    (Ok((terminate, interrupt)), Ok(listener)) => (terminate, interrupt, listener),
+                    (Err(error), _) | (_, Err(error)) => return drop(ready.send(Err(error))),
+                };
+                let _ = ready.send(Ok(()));
+                let listening = async {
+                    match (listener, frames) {
+                        (Some(listener), Some((_, queue))) => {
+                            forwarded::listen(listener, queue, status).await
+                        }
+                        _ => std::future::pending().await,
+                    }
+                };
+                tokio::select! {
+                    _ = terminate.recv() => info!("SIGTERM: stopping"),
+                    _ = interrupt.recv() => info!("SIGINT: stopping"),
+                    _ = shutdown_received => {}
+                    () = listening => {}
+                }
+                flag.store(true, Ordering::Relaxed);
+            });
+        })?;
+        is_ready.recv().context("the recorder's I/O thread died")??;
+        Ok(Self { stop, queue, shutdown: Some(shutdown), thread: Some(thread) })
+    }
+}
+
+fn signals() -> std::io::Result<(tokio::signal::unix::Signal, tokio::signal::unix::Signal)> {
+    use tokio::signal::unix::{SignalKind, signal};
+    Ok((signal(SignalKind::terminate())?, signal(SignalKind::interrupt())?))
+}
+
+impl Drop for Background {
+    fn drop(&mut self) {
+        if let Some(shutdown) = self.shutdown.take() {
+            let _ = shutdown.send(());
+        }
+        if let Some(thread) = self.thread.take() {
+            let _ = thread.join();
+        }
+    }
+}
