@@ -125,3 +125,28 @@ fn the_unit_runs_the_installed_files_as_nao_at_low_priority() {
         assert!(dry.contains(&format!(":{file}\n")), "the installer does not copy {file}:\n{dry}");
     }
 }
+
+#[test]
+fn cross_builds_the_nao_targets_statically_for_their_atoms() {
+    let text = std::fs::read_to_string(repository().join("cross.toml")).unwrap();
+    let cross: toml::Table = text.parse().expect("cross.toml is TOML");
+    let flags = |target: &str| {
+        let passthrough = cross["target"][target]["env"]["passthrough"].as_array().unwrap();
+        let variable = format!("CARGO_TARGET_{}_RUSTFLAGS=", target.to_uppercase().replace('-', "_"));
+        passthrough
+            .iter()
+            .find_map(|entry| entry.as_str()?.strip_prefix(variable.as_str()))
+            .unwrap_or_else(|| panic!("cross.toml sets no {variable} for {target}"))
+            .to_owned()
+    };
+    let v6 = flags("x86_64-unknown-linux-gnu");
+    let v5 = flags("i686-unknown-linux-gnu");
+    assert!(v6.contains("-C target-cpu=silvermont") && v6.contains("+crt-static"), "{v6}");
+    assert!(v5.contains("-C target-cpu=atom") && v5.contains("+crt-static"), "{v5}");
+    assert!(!v6.contains("native") && !v5.contains("native"));
+
+    let build = std::fs::read_to_string(repository().join("deploy/build-nao.sh")).unwrap();
+    assert!(
+        build.contains("cpu=silvermont") && build.contains("cpu=bonnell") && build.contains("+crt-static")
+    );
+}
