@@ -4,11 +4,14 @@
 # qemu-user with an Atom CPU model, and checks that
 #   1. it runs there, and tract fell back to its generic kernels (the log's `isa=`),
 #   2. its hypotheses equal the native run's,
-#   3. AVX2 code dies there with SIGILL (a negative control: the emulated CPU really lacks AVX).
+#   3. AVX2 code dies there with SIGILL (a negative control: the emulated CPU really lacks AVX),
+#   4. the daemon, started and asked to relocalise under strace, opens no NSS file (a static glibc
+#      would load the robot's NSS libraries to resolve a host name).
 #
 #   deploy/atom-check.sh [v6] [v5]     (default: v6; CI runs v6)
 #
-# V6: Intel Atom E3845 (Silvermont: SSE4.2, no AVX/FMA/XSAVE) as a qemu CPU model (REFERENCE.md).
+# V6: Intel Atom E3845 (Silvermont: SSE4.2, no AVX/FMA/XSAVE) as a qemu CPU model: Nehalem with the
+# Atom's family/model and the extensions it adds (movbe, aes, pclmulqdq, rdrand, erms).
 # V5: 32-bit Atom N270-class, `qemu-i386 -cpu n270`.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -16,15 +19,15 @@ cd "$(dirname "$0")/.."
 robots=("$@")
 [ ${#robots[@]} -gt 0 ] || robots=(v6)
 
-# What TRACT_CPU_ISA takes away to leave tract the generic kernels an Atom gets (REFERENCE.md).
+# What TRACT_CPU_ISA takes away to leave tract the generic kernels an Atom gets.
 GENERIC_ONLY=-avx,-avx2,-fma,-f16c,-avx512f,-avx512vnni,-avx512fp16,-avxvnni
 ATOM_E3845='Nehalem,family=6,model=55,stepping=8,+movbe,+aes,+pclmulqdq,+rdrand,+erms,model-id=Intel(R) Atom(TM) CPU E3845 @ 1.91GHz'
 
-if ! command -v qemu-x86_64 >/dev/null || ! command -v qemu-i386 >/dev/null; then
+if ! command -v qemu-x86_64 >/dev/null || ! command -v qemu-i386 >/dev/null || ! command -v strace >/dev/null; then
     sudo=""
     [ "$(id -u)" -eq 0 ] || sudo="sudo"
-    $sudo apt-get install -y -q qemu-user >/dev/null 2>&1 \
-        || { $sudo apt-get update -q >/dev/null && $sudo apt-get install -y -q qemu-user >/dev/null; }
+    $sudo apt-get install -y -q qemu-user strace >/dev/null 2>&1 \
+        || { $sudo apt-get update -q >/dev/null && $sudo apt-get install -y -q qemu-user strace >/dev/null; }
 fi
 
 scratch="$(mktemp -d)"
@@ -112,10 +115,37 @@ for robot in "${robots[@]}"; do
     result="$(compare "$scratch/generic.jsonl" "$scratch/atom.jsonl" 0 2>&1)" \
         || fail "$robot: the Atom model's output differs from the native generic kernels': $result"
     echo "equal to the native run with the same (generic) kernels: $result"
-    # AVX/FMA kernels sum in another order: float32 rounding apart (a heading from a near-degenerate
+    # The native run's own kernels (AVX/FMA on a desktop) sum in another order: float32 rounding apart (a heading from a near-degenerate
     # atan2 moves by ~1e-4 rad), the same hypotheses.
     result="$(compare "$scratch/native.jsonl" "$scratch/atom.jsonl" 1e-3 2>&1)" \
         || fail "$robot: the Atom model's output differs from the native AVX run's: $result"
-    echo "equal to the native run with AVX kernels within 1e-3 (m, rad, probability): $result"
+    echo "equal to the native run with its own kernels within 1e-3 (m, rad, probability): $result"
+
+    # The daemon resolves no host names: static glibc would load the robot's NSS libraries for that.
+    port=$((20000 + RANDOM % 20000))
+    strace -f -qq -e trace=open,openat -o "$scratch/strace" "$binary" run --source sim --sensors off \
+        --control "udp:127.0.0.1:$port" --publish "udp:127.0.0.1:$((port + 1))" 2> "$scratch/daemon.log" &
+    daemon=$!
+    python3 - "$port" <<'PY' || fail "the daemon under strace did not answer: $(tail -3 "$scratch/daemon.log")"
+import sys, time
+sys.path.insert(0, "examples")
+from relocd_client import Control
+control = Control(f"udp:127.0.0.1:{sys.argv[1]}", timeout=0.2)
+for attempt in range(100):  # until the daemon is up
+    try:
+        print("the daemon answered a relocalisation request as trigger", control.relocalise())
+        break
+    except TimeoutError:
+        pass
+else:
+    sys.exit(1)
+time.sleep(1.0)  # the burst
+PY
+    pkill -TERM -P "$daemon"  # relocd, the child of strace
+    wait "$daemon" || fail "the daemon did not stop cleanly on SIGTERM"
+    if grep -E 'nsswitch|libnss|/etc/hosts|resolv\.conf' "$scratch/strace"; then
+        fail "the daemon looked up host names (above): static glibc would load the robot's NSS libraries"
+    fi
+    echo "the daemon opened no NSS file (nsswitch.conf, hosts, resolv.conf, libnss_*)"
 done
 echo "atom-check: OK (${robots[*]})"

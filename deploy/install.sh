@@ -4,7 +4,8 @@
 #   deploy/install.sh ROBOT [--dry-run] [--uninstall] [--robot v6|v5] [--binary FILE]
 #                           [--model FILE] [--config FILE] [--after UNIT]
 #
-#   ROBOT          host name or address, or USER@HOST (default user: nao; it needs sudo, or use root@HOST)
+#   ROBOT          host name or address, or USER@HOST (default user: nao, who needs password-less
+#                  sudo; or use root@HOST)
 #   --dry-run      print every command, run none (not even the build)
 #   --uninstall    stop and remove the unit and the installed files (keeps relocd.toml and recordings)
 #   --robot        v6 (default) or v5: which static binary deploy/build-nao.sh builds
@@ -19,7 +20,12 @@
 set -euo pipefail
 repository="$(cd "$(dirname "$0")/.." && pwd)"
 
-usage() { sed -n '2,19p' "$0" | sed 's/^# \{0,1\}//' >&2; exit 2; }
+usage() { awk 'NR > 1 && /^#/ { sub(/^# ?/, ""); print; next } NR > 1 { exit }' "$0" >&2; exit "${1:-2}"; }
+# The value of an option: the next word, which must not be another option.
+value() {
+    [ -n "${2:-}" ] && [[ "$2" != -* ]] || { echo "$1 needs a value" >&2; exit 2; }
+    printf '%s' "$2"
+}
 
 robot_host="" dry_run=false uninstall=false robot=v6 binary="" after=""
 model="" config="" replace_config=false
@@ -27,12 +33,12 @@ while [ $# -gt 0 ]; do
     case "$1" in
         --dry-run) dry_run=true ;;
         --uninstall) uninstall=true ;;
-        --robot) robot="${2:?--robot needs v6 or v5}"; shift ;;
-        --binary) binary="${2:?--binary needs a file}"; shift ;;
-        --model) model="${2:?--model needs a file}"; shift ;;
-        --config) config="${2:?--config needs a file}"; replace_config=true; shift ;;
-        --after) after="${2:?--after needs a unit name}"; shift ;;
-        -h|--help) usage ;;
+        --robot) robot="$(value "$1" "${2:-}")"; shift ;;
+        --binary) binary="$(value "$1" "${2:-}")"; shift ;;
+        --model) model="$(value "$1" "${2:-}")"; shift ;;
+        --config) config="$(value "$1" "${2:-}")"; replace_config=true; shift ;;
+        --after) after="$(value "$1" "${2:-}")"; shift ;;
+        -h|--help) usage 0 ;;
         -*) echo "unknown option $1" >&2; usage ;;
         *) [ -z "$robot_host" ] || usage; robot_host="$1" ;;
     esac
@@ -51,7 +57,8 @@ case "$after" in *[!A-Za-z0-9@._:-]*) echo "--after $after: not a unit name" >&2
 [[ "$robot_host" == *@* ]] || robot_host="nao@$robot_host"
 dir=/home/nao/relocd
 unit=/etc/systemd/system/relocd.service
-sudo="sudo "
+# -n: fail with "a password is required" instead of waiting for one over a non-interactive ssh.
+sudo="sudo -n "
 [[ "$robot_host" != root@* ]] || sudo=""
 
 # One word as a shell would need it typed: quoted only where it has to be.
@@ -95,14 +102,16 @@ if [ -z "$binary" ]; then
 fi
 
 remote "mkdir -p $dir"
-run rsync -t --chmod=F755 "$binary" "$robot_host:$dir/relocd"
-run rsync -t --chmod=F644 "$model" "$robot_host:$dir/model.onnx"
-run rsync -t --chmod=F644 deploy/relocd.service "$robot_host:$dir/relocd.service"
+run rsync -tp --chmod=F755 "$binary" "$robot_host:$dir/relocd"
+run rsync -tp --chmod=F644 "$model" "$robot_host:$dir/model.onnx"
+run rsync -tp --chmod=F644 deploy/relocd.service "$robot_host:$dir/relocd.service"
 if "$replace_config"; then
-    run rsync -t --chmod=F644 "$config" "$robot_host:$dir/relocd.toml"
+    run rsync -tp --chmod=F644 "$config" "$robot_host:$dir/relocd.toml"
 else
-    run rsync -t --chmod=F644 --ignore-existing "$config" "$robot_host:$dir/relocd.toml"
+    run rsync -tp --chmod=F644 --ignore-existing "$config" "$robot_host:$dir/relocd.toml"
 fi
+# Installed as root, the files must still belong to nao, who runs relocd and edits its config.
+[ -n "$sudo" ] || remote "chown -R nao:nao $dir"
 remote "${sudo}install -m 0644 $dir/relocd.service $unit"
 if [ -n "$after" ]; then
     remote "${sudo}mkdir -p $unit.d && printf '[Unit]\\nAfter=%s\\n' $after | ${sudo}tee $unit.d/after.conf >/dev/null"

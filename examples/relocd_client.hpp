@@ -16,6 +16,7 @@
 #include <arpa/inet.h>
 #include <poll.h>
 #include <sys/socket.h>
+#include <sys/stat.h>
 #include <sys/un.h>
 #include <unistd.h>
 
@@ -27,9 +28,9 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
-#include <map>
-#include <memory>
+#include <locale>
 #include <optional>
+#include <sstream>
 #include <string>
 #include <string_view>
 #include <utility>
@@ -51,13 +52,14 @@ struct Value {
   double number = 0.0;
   std::string string;
   std::vector<Value> array;
-  std::map<std::string, Value> object;
+  std::vector<std::pair<std::string, Value>> object;  // in order; vector allows the incomplete Value
 
-  // The member `key` of an object, or nullptr.
+  // The member `key` of an object (the last one of that name), or nullptr.
   const Value* get(const std::string& key) const {
     if (kind != Kind::Object) return nullptr;
-    auto found = object.find(key);
-    return found == object.end() ? nullptr : &found->second;
+    for (auto member = object.rbegin(); member != object.rend(); ++member)
+      if (member->first == key) return &member->second;
+    return nullptr;
   }
 };
 
@@ -129,7 +131,7 @@ class Parser {
         std::string key;
         Value member;
         if (!parse_string(key) || !consume(':') || !parse_value(member, depth + 1)) return false;
-        value.object[key] = std::move(member);
+        value.object.emplace_back(std::move(key), std::move(member));
       } while (consume(','));
       return consume('}');
     }
@@ -147,11 +149,13 @@ class Parser {
     if (literal("true")) return value.kind = Value::Kind::Bool, value.boolean = true, true;
     if (literal("false")) return value.kind = Value::Kind::Bool, true;
     if (literal("null")) return true;
-    std::string number(text_.substr(position_, 32));
-    char* end = nullptr;
-    value.number = std::strtod(number.c_str(), &end);
-    if (end == number.c_str()) return false;
-    position_ += static_cast<std::size_t>(end - number.c_str());
+    // JSON numbers use '.', whatever the program's locale says.
+    std::size_t end = position_;
+    while (end < text_.size() && std::strchr("0123456789+-.eE", text_[end]) && text_[end] != '\0') ++end;
+    std::istringstream number(std::string(text_.substr(position_, end - position_)));
+    number.imbue(std::locale::classic());
+    if (end == position_ || !(number >> value.number) || number.peek() != EOF) return false;
+    position_ = end;
     value.kind = Value::Kind::Number;
     return true;
   }
@@ -196,7 +200,16 @@ struct Message {
   }
 };
 
-// Decodes and checks one JSON datagram as relocd's reference decoder does.
+// A whole number in [0, 2^53] (what a JSON double holds exactly) as an integer.
+inline std::optional<std::uint64_t> whole_number(const json::Value* value) {
+  if (!value || value->kind != json::Value::Kind::Number) return std::nullopt;
+  double number = value->number;
+  if (!(number >= 0 && number <= 9007199254740992.0) || std::floor(number) != number) return std::nullopt;
+  return static_cast<std::uint64_t>(number);
+}
+
+// Decodes one JSON datagram and checks what it reads: the schema, the triggers, finite hypotheses
+// weighted in [0, 1] with sigma >= 0, and either hypotheses or a failure.
 inline std::optional<Message> decode(std::string_view datagram, std::string* error) {
   auto fail = [error](const std::string& why) -> std::optional<Message> {
     if (error) *error = "not a relocd message: " + why;
@@ -208,21 +221,21 @@ inline std::optional<Message> decode(std::string_view datagram, std::string* err
     if (!value || value->kind != json::Value::Kind::Number || !std::isfinite(value->number)) return false;
     return out = value->number, true;
   };
-  double schema = 0;
-  if (!number(root->get("schema"), schema)) return fail("no schema");
-  if (schema != kSchemaVersion) return fail("schema " + std::to_string(int(schema)) + ", this client reads 1");
+  auto schema = whole_number(root->get("schema"));
+  if (!schema) return fail("no schema");
+  if (*schema != kSchemaVersion) return fail("schema " + std::to_string(*schema) + ", this client reads 1");
   Message message;
-  double seq = 0;
-  if (!number(root->get("seq"), seq) || !number(root->get("published"), message.published)) return fail("no seq");
-  message.seq = static_cast<std::uint64_t>(seq);
+  auto seq = whole_number(root->get("seq"));
+  if (!seq || !number(root->get("published"), message.published)) return fail("no seq");
+  message.seq = *seq;
   const json::Value* triggers = root->get("triggers");
   if (!triggers || triggers->kind != json::Value::Kind::Array || triggers->array.empty()) return fail("no triggers");
   for (const auto& item : triggers->array) {
     Trigger trigger;
-    double id = 0;
+    auto id = whole_number(item.get("id"));
     const json::Value* kind = item.get("kind");
-    if (!number(item.get("id"), id) || !kind || kind->kind != json::Value::Kind::String) return fail("bad trigger");
-    trigger.id = static_cast<std::uint64_t>(id);
+    if (!id || !kind || kind->kind != json::Value::Kind::String) return fail("bad trigger");
+    trigger.id = *id;
     trigger.kind = kind->string;
     if (const json::Value* reason = item.get("reason"); reason && reason->kind == json::Value::Kind::String)
       trigger.reason = reason->string;
@@ -313,7 +326,7 @@ class Socket {
   bool bind(const Address& address, std::string* error) {
     if (address.family == AF_UNIX) {
       const char* path = reinterpret_cast<const sockaddr_un*>(&address.storage)->sun_path;
-      ::unlink(path);  // a socket file left behind by an earlier run
+      if (!remove_stale_socket(address, error)) return false;
       bound_path_ = path;
     }
     if (::bind(fd_, reinterpret_cast<const sockaddr*>(&address.storage), address.length) == 0) return true;
@@ -345,9 +358,35 @@ class Socket {
     buffer.resize(static_cast<std::size_t>(length));
     return buffer;
   }
+  // Discards datagrams already waiting (answers to requests that timed out).
+  void drain() const {
+    char byte;
+    while (::recv(fd_, &byte, 1, MSG_DONTWAIT) >= 0) {
+    }
+  }
   int fd() const { return fd_; }
 
  private:
+  // Removes a socket file left behind by a process that died; refuses a live socket or another file.
+  static bool remove_stale_socket(const Address& address, std::string* error) {
+    const char* path = reinterpret_cast<const sockaddr_un*>(&address.storage)->sun_path;
+    struct stat status {};
+    if (::lstat(path, &status) != 0) return true;  // nothing there
+    bool live = false;
+    if (S_ISSOCK(status.st_mode)) {
+      int probe = ::socket(AF_UNIX, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+      live = probe >= 0 && ::connect(probe, reinterpret_cast<const sockaddr*>(&address.storage), address.length) == 0;
+      if (probe >= 0) ::close(probe);
+      if (!live && ::unlink(path) == 0) return true;
+      if (!live) {
+        if (error) *error = std::string("unlink: ") + std::strerror(errno);
+        return false;
+      }
+    }
+    if (error) *error = std::string(path) + (live ? " is in use by another process" : " exists and is not a socket");
+    return false;
+  }
+
   int fd_ = -1;
   std::string bound_path_;
 };
@@ -434,23 +473,26 @@ class Control {
     auto answer = ask(request);
     if (!answer) return std::nullopt;
     const json::Value* accepted = answer->get("accepted");
-    const json::Value* trigger = accepted ? accepted->get("trigger") : nullptr;
-    if (!trigger || trigger->kind != json::Value::Kind::Number) {
-      error_ = "unexpected answer from relocd";
-      return std::nullopt;
-    }
-    return static_cast<std::uint64_t>(trigger->number);
+    auto trigger = whole_number(accepted ? accepted->get("trigger") : nullptr);
+    if (!trigger) error_ = "unexpected answer from relocd";
+    return trigger;
   }
 
  private:
   std::optional<json::Value> ask(const std::string& request) {
-    if (!ok_ || !socket_.send_to(request, daemon_, &error_)) return std::nullopt;
+    if (!ok_) return std::nullopt;
+    socket_.drain();  // an answer that came after an earlier request timed out is not this one's
+    if (!socket_.send_to(request, daemon_, &error_)) return std::nullopt;
     auto datagram = socket_.receive(timeout_ms_, &error_);
     if (!datagram) return std::nullopt;
     auto answer = json::Parser(*datagram).parse(&error_);
     if (answer) {
       if (const json::Value* refused = answer->get("error")) {
         error_ = "relocd refused the request: " + refused->string;
+        return std::nullopt;
+      }
+      if (answer->kind != json::Value::Kind::Object) {
+        error_ = "unexpected answer from relocd";
         return std::nullopt;
       }
     }

@@ -21,6 +21,7 @@ The message format is docs/protocol.md (schema 1).
 
 import argparse
 import json
+import math
 import os
 import socket
 import stat
@@ -98,6 +99,11 @@ def decode(data: bytes) -> Message:
         raise RelocdError(f"not a relocd message: {error!r}") from None
     if not message.triggers or bool(hypotheses) == (message.failure is not None):
         raise RelocdError("not a relocd message: it needs triggers and either hypotheses or a failure")
+    for h in hypotheses:
+        numbers = (h.x, h.y, h.theta, h.weight) + h.sigma
+        if len(h.sigma) != 3 or not all(map(math.isfinite, numbers)) or not 0 <= h.weight <= 1 \
+                or min(h.sigma) < 0:
+            raise RelocdError("not a relocd message: a hypothesis is not finite, weighted in [0, 1] with sigma >= 0")
     return message
 
 
@@ -114,15 +120,27 @@ def _socket_for(address: str) -> Tuple[socket.socket, object]:
     raise ValueError(f"{address!r}: expected udp:IP:PORT or unix:PATH")
 
 
+def _remove_stale_socket(path: str) -> None:
+    """Removes a socket file left behind by a process that died; refuses a live one or a file."""
+    if not stat.S_ISSOCK(os.stat(path).st_mode):
+        raise OSError(f"{path} exists and is not a socket")
+    probe = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+    try:
+        probe.connect(path)
+        raise OSError(f"{path} is in use by another process")
+    except ConnectionRefusedError:
+        os.unlink(path)
+    finally:
+        probe.close()
+
+
 class Subscriber:
     """Receives the messages relocd publishes to `address` (one of its `publish.targets`)."""
 
     def __init__(self, address: str):
         self.socket, self.address = _socket_for(address)
         if isinstance(self.address, str) and os.path.exists(self.address):
-            if not stat.S_ISSOCK(os.stat(self.address).st_mode):
-                raise OSError(f"{self.address} exists and is not a socket")
-            os.unlink(self.address)  # a socket file left by an earlier run
+            _remove_stale_socket(self.address)
         self.socket.bind(self.address)
 
     def receive(self, timeout: Optional[float] = None) -> Message:
@@ -165,17 +183,32 @@ class Control:
             # relocd answers to the sender's path, so bind one of our own.
             self.own_path = os.path.join(tempfile.gettempdir(), f"relocd-client-{os.getpid()}-{id(self)}")
             self.socket.bind(self.own_path)
-        self.socket.settimeout(timeout)
+        self.timeout = timeout
 
-    def _ask(self, request: dict) -> dict:
+    def _ask(self, request: dict, key: str) -> dict:
+        """Sends `request`; returns the `key` member of its answer. Answers that came after an earlier
+        request timed out are discarded first, so they cannot pass for this one's."""
+        self.socket.setblocking(False)
+        try:
+            while True:
+                self.socket.recv(MAX_DATAGRAM)
+        except BlockingIOError:
+            pass
+        self.socket.settimeout(self.timeout)
         self.socket.sendto(json.dumps(request).encode(), self.daemon)
         try:
             answer = json.loads(self.socket.recv(MAX_DATAGRAM))
         except socket.timeout:
             raise TimeoutError("relocd did not answer the control request") from None
+        except ValueError as error:
+            raise RelocdError(f"unexpected answer from relocd: {error}") from None
+        if not isinstance(answer, dict):
+            raise RelocdError(f"unexpected answer from relocd: {answer!r}")
         if "error" in answer:
             raise RelocdError(f"relocd refused the request: {answer['error']}")
-        return answer
+        if key not in answer:
+            raise RelocdError(f"unexpected answer from relocd: {answer!r}")
+        return answer[key]
 
     def relocalise(self, reason: Optional[str] = None, head_yaw: Optional[float] = None) -> int:
         """Asks for a relocalisation; returns the trigger id the published message will list."""
@@ -184,11 +217,14 @@ class Control:
             request["reason"] = reason
         if head_yaw is not None:
             request["head_yaw"] = head_yaw
-        return int(self._ask({"relocalise": request})["accepted"]["trigger"])
+        accepted = self._ask({"relocalise": request}, "accepted")
+        if not isinstance(accepted, dict) or not isinstance(accepted.get("trigger"), int):
+            raise RelocdError(f"unexpected answer from relocd: {accepted!r}")
+        return accepted["trigger"]
 
     def status(self) -> dict:
         """relocd's counters, game state and last latencies."""
-        return self._ask({"status": {}})["status"]
+        return self._ask({"status": {}}, "status")
 
     def close(self) -> None:
         self.socket.close()

@@ -54,11 +54,15 @@ def main():
     if camera is not None and len(camera) != 4:
         sys.exit("error: --camera needs four numbers: height,pitch,roll,head_yaw")
 
+    if not 0 < args.fps <= 60:
+        sys.exit("error: --fps must lie in (0, 60]")
+
     frames = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-    frames.connect(args.frames)
-    control = Control(args.control)
+    control = None
     trigger = None
     try:
+        frames.connect(args.frames)
+        control = Control(args.control)
         end = time.monotonic() + args.seconds
         while time.monotonic() < end:
             frames.sendall(frame_header(args.width, args.height, time.time(), camera) + payload)
@@ -69,7 +73,8 @@ def main():
     except (OSError, RelocdError, TimeoutError) as error:
         sys.exit(f"error: {error}")
     finally:
-        control.close()
+        if control is not None:
+            control.close()
         frames.close()
 
 

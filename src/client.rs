@@ -114,11 +114,20 @@ impl Drop for Socket {
     }
 }
 
-/// Removes a socket file left behind by a process that died; refuses to touch anything else.
+/// Removes a socket file left behind by a process that died; refuses a live socket (another
+/// process receives on it) and anything that is not a socket.
 fn remove_stale_socket(path: &Path) -> io::Result<()> {
     use std::os::unix::fs::FileTypeExt;
     match std::fs::symlink_metadata(path) {
-        Ok(metadata) if metadata.file_type().is_socket() => std::fs::remove_file(path),
+        Ok(metadata) if metadata.file_type().is_socket() => {
+            if UnixDatagram::unbound()?.connect(path).is_ok() {
+                return Err(io::Error::new(
+                    io::ErrorKind::AddrInUse,
+                    format!("{} is in use by another process", path.display()),
+                ));
+            }
+            std::fs::remove_file(path)
+        }
         Ok(_) => Err(io::Error::new(
             io::ErrorKind::AlreadyExists,
             format!("{} exists and is not a socket", path.display()),
@@ -231,43 +240,47 @@ impl Control {
     pub fn relocalise(&self, reason: Option<&str>, head_yaw: Option<f64>) -> Result<u64, ClientError> {
         let request =
             ControlRequest::Relocalise(RelocaliseRequest { reason: reason.map(str::to_owned), head_yaw });
-        let answer = self.ask(&request)?;
-        answer
-            .get("accepted")
-            .and_then(|accepted| accepted.get("trigger"))
+        let accepted = self.ask(&request, "accepted")?;
+        accepted
+            .get("trigger")
             .and_then(serde_json::Value::as_u64)
-            .ok_or_else(|| ClientError::Unexpected(answer.to_string()))
+            .ok_or_else(|| ClientError::Unexpected(accepted.to_string()))
     }
 
     /// relocd's counters, game state and last latencies (see docs/protocol.md).
     pub fn status(&self) -> Result<serde_json::Value, ClientError> {
-        let mut answer = self.ask(&ControlRequest::Status(StatusRequest {}))?;
-        answer
-            .get_mut("status")
-            .map(serde_json::Value::take)
-            .ok_or_else(|| ClientError::Unexpected(answer.to_string()))
+        self.ask(&ControlRequest::Status(StatusRequest {}), "status")
     }
 
-    fn ask(&self, request: &ControlRequest) -> Result<serde_json::Value, ClientError> {
+    /// Sends `request` and returns the `key` member of its answer. Answers that arrived after an
+    /// earlier request timed out are discarded first, so they cannot pass for this one's.
+    fn ask(&self, request: &ControlRequest, key: &str) -> Result<serde_json::Value, ClientError> {
+        let mut buffer = vec![0; MAX_DATAGRAM];
+        self.socket.set_nonblocking(true)?;
+        while self.socket.recv(&mut buffer).is_ok() {}
+        self.socket.set_nonblocking(false)?;
+
         let bytes = serde_json::to_vec(request).expect("a request is plain data");
         match (&self.socket, &self.daemon) {
             (Socket::Udp(socket), Address::Udp(address)) => socket.send_to(&bytes, address)?,
             (Socket::Unix(socket, _), Address::Unix(path)) => socket.send_to(&bytes, path)?,
             _ => unreachable!("connect binds a socket of the daemon's kind"),
         };
-        let mut buffer = vec![0; MAX_DATAGRAM];
         let length = match self.socket.recv(&mut buffer) {
             Ok(length) => length,
             Err(error) if is_timeout(&error) => return Err(ClientError::Timeout(ANSWER_TIMEOUT)),
             Err(error) => return Err(error.into()),
         };
-        let answer: serde_json::Value = serde_json::from_slice(&buffer[..length]).map_err(|error| {
-            ClientError::Unexpected(format!("{error}: {}", String::from_utf8_lossy(&buffer[..length])))
-        })?;
-        match answer.get("error").and_then(serde_json::Value::as_str) {
-            Some(reason) => Err(ClientError::Refused(reason.to_owned())),
-            None => Ok(answer),
+        let text = String::from_utf8_lossy(&buffer[..length]);
+        let mut answer: serde_json::Value = serde_json::from_str(&text)
+            .map_err(|error| ClientError::Unexpected(format!("{error}: {text}")))?;
+        if let Some(reason) = answer.get("error").and_then(serde_json::Value::as_str) {
+            return Err(ClientError::Refused(reason.to_owned()));
         }
+        answer
+            .get_mut(key)
+            .map(serde_json::Value::take)
+            .ok_or_else(|| ClientError::Unexpected(text.into_owned()))
     }
 }
 
@@ -309,12 +322,17 @@ mod tests {
     }
 
     #[test]
-    fn a_unix_subscriber_removes_its_socket_and_never_replaces_a_file() {
+    fn a_unix_subscriber_removes_its_socket_and_never_takes_over_another() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("hypotheses");
         let address = Address::Unix(path.clone());
         drop(Subscriber::bind(&address).unwrap());
         assert!(!path.exists());
+        let live = Subscriber::bind(&address).unwrap();
+        assert!(
+            matches!(Subscriber::bind(&address), Err(ClientError::Io(error)) if error.kind() == io::ErrorKind::AddrInUse)
+        );
+        drop(live);
         std::fs::write(&path, "not a socket").unwrap();
         assert!(matches!(Subscriber::bind(&address), Err(ClientError::Io(_))));
         assert_eq!(std::fs::read_to_string(&path).unwrap(), "not a socket");
@@ -332,9 +350,21 @@ mod tests {
     }
 
     #[test]
-    fn a_control_client_without_a_daemon_times_out() {
-        let silent = UdpSocket::bind("127.0.0.1:0").unwrap();
-        let control = Control::connect(&Address::Udp(silent.local_addr().unwrap())).unwrap();
+    fn a_late_answer_is_not_taken_for_the_next_requests() {
+        let daemon = UdpSocket::bind("127.0.0.1:0").unwrap();
+        let control = Control::connect(&Address::Udp(daemon.local_addr().unwrap())).unwrap();
         assert!(matches!(control.status(), Err(ClientError::Timeout(_))));
+
+        let mut buffer = [0u8; 512];
+        let (_, client) = daemon.recv_from(&mut buffer).unwrap();
+        daemon.send_to(br#"{"status": {"late": true}}"#, client).unwrap();
+        let answering = std::thread::spawn(move || {
+            let (length, client) = daemon.recv_from(&mut buffer).unwrap();
+            assert_eq!(&buffer[..length], br#"{"relocalise":{}}"#);
+            daemon.send_to(br#"{"accepted": {"trigger": 2}}"#, client).unwrap();
+        });
+        std::thread::sleep(Duration::from_millis(50));
+        assert_eq!(control.relocalise(None, None).unwrap(), 2);
+        answering.join().unwrap();
     }
 }

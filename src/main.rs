@@ -338,6 +338,7 @@ fn record(args: RecordArgs) -> anyhow::Result<()> {
         fps: args.fps,
         format: args.format.into(),
         camera: config.camera,
+        queue: config.frames.queue,
     };
     let progress = ProgressBar::new(options.count).with_style(
         ProgressStyle::with_template("{elapsed_precise} [{bar:40}] {pos}/{len} frames")
@@ -349,7 +350,11 @@ fn record(args: RecordArgs) -> anyhow::Result<()> {
     info!(frames = summary.frames, seconds = summary.seconds, rejected = summary.rejected, "recorded");
     println!(
         "{}",
-        serde_json::json!({ "recording": options.out, "frames": summary.frames, "seconds": summary.seconds })
+        serde_json::json!({
+            "recording": options.out.display().to_string(),
+            "frames": summary.frames,
+            "seconds": summary.seconds,
+        })
     );
     Ok(())
 }

@@ -17,7 +17,7 @@ use crate::daemon::config::{CameraConfig, SourceSpec};
 use crate::daemon::sockets;
 use crate::daemon::source::forwarded::{self, ForwardedSource, FrameQueue};
 use crate::daemon::source::sim::SimSource;
-use crate::daemon::source::{CaptureRequest, FrameSource, SourceError};
+use crate::daemon::source::{CaptureRequest, FrameSource, SourceError, sleep_unless_stopped};
 use crate::daemon::status::Status;
 use crate::geometry::{FieldDimensions, FieldModel};
 use crate::recording::{FrameFormat, FrameRecord, RecordingWriter};
@@ -42,6 +42,8 @@ pub struct RecordOptions {
     pub format: FrameFormat,
     /// V4L2 size and rate, and the simulator's size.
     pub camera: CameraConfig,
+    /// Forwarded frames kept waiting, at most.
+    pub queue: usize,
 }
 
 /// What was recorded.
@@ -61,21 +63,29 @@ pub fn record(options: &RecordOptions, mut on_frame: impl FnMut(u64)) -> anyhow:
     if !(options.fps > 0.0 && options.fps <= 60.0) {
         bail!("--fps {}: expected frames per second in (0, 60]", options.fps);
     }
+    if options.count == 0 {
+        bail!("--count 0: nothing to record");
+    }
     let status = Arc::new(Status::new(options.source.to_string(), String::new()));
-    let background = Background::start(&options.source, status.clone())?;
+    let background = Background::start(&options.source, options.queue, status.clone())?;
     let mut source = open_source(&options.source, &options.camera, background.queue.clone())?;
     let mut writer = RecordingWriter::create(&options.out)?;
     info!(source = %options.source, out = %options.out.display(), "recording");
 
+    // One frame per capture, paced here: a source's first frame comes at once, so only this loop
+    // can hold the rate across frames.
     let spacing = Duration::from_secs_f64(1.0 / options.fps);
     let started = Instant::now();
     let end = options.duration.map(|duration| started + duration);
     let (mut frames, mut first, mut last) = (0u64, None, 0.0);
-    while frames < options.count && end.is_none_or(|end| Instant::now() < end) {
-        let batch = (options.count - frames).min(options.fps.ceil() as u64);
-        let deadline = Instant::now() + spacing * batch as u32 + PATIENCE;
+    let mut next = started;
+    while frames < options.count && end.is_none_or(|end| next < end) {
+        if !sleep_unless_stopped(&background.stop, next) {
+            break;
+        }
+        let deadline = Instant::now() + PATIENCE;
         let request = CaptureRequest {
-            count: batch as usize,
+            count: 1,
             spacing,
             deadline: end.map_or(deadline, |end| deadline.min(end)),
             stop: &background.stop,
@@ -84,11 +94,13 @@ pub fn record(options: &RecordOptions, mut on_frame: impl FnMut(u64)) -> anyhow:
             Ok(captured) => captured,
             Err(SourceError::Timeout(waited)) => {
                 warn!("no frame from {} for {:.1} s", options.source, waited.as_secs_f64());
+                next = Instant::now();
                 continue;
             }
             Err(SourceError::Stopped) => break,
             Err(error) => return Err(error).context("recording stopped"),
         };
+        next = Instant::now().max(next + spacing);
         for frame in captured {
             let (width, height) = frame.frame.dimensions();
             let record = FrameRecord {
@@ -104,9 +116,6 @@ pub fn record(options: &RecordOptions, mut on_frame: impl FnMut(u64)) -> anyhow:
             last = frame.taken;
             frames += 1;
             on_frame(frames);
-        }
-        if background.stop.load(Ordering::Relaxed) {
-            break;
         }
     }
     Ok(RecordSummary {
@@ -164,10 +173,10 @@ struct Background {
 }
 
 impl Background {
-    fn start(source: &SourceSpec, status: Arc<Status>) -> anyhow::Result<Self> {
+    fn start(source: &SourceSpec, queue: usize, status: Arc<Status>) -> anyhow::Result<Self> {
         let stop = Arc::new(AtomicBool::new(false));
         let frames = match source {
-            SourceSpec::Frames(path) => Some((path.clone(), Arc::new(FrameQueue::new(8)))),
+            SourceSpec::Frames(path) => Some((path.clone(), Arc::new(FrameQueue::new(queue)))),
             _ => None,
         };
         let queue = frames.as_ref().map(|(_, queue)| queue.clone());

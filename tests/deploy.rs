@@ -11,22 +11,13 @@ fn repository() -> &'static Path {
     Path::new(env!("CARGO_MANIFEST_DIR"))
 }
 
-/// A directory with stand-in `ssh` and `rsync` that append their command line, quoted as the
-/// installer prints it, to `calls.log` beside them.
+/// A directory with stand-in `ssh` and `rsync` that append their arguments to `calls.log` beside
+/// them, one command per line, each word ended by a NUL: no quoting to get wrong.
 fn stand_in_tools() -> tempfile::TempDir {
     let dir = tempfile::tempdir().unwrap();
-    let log = dir.path().join("calls.log");
     let script = format!(
-        r#"#!/usr/bin/env bash
-quote() {{
-    case "$1" in
-        '' | *[!A-Za-z0-9_./:@=,+-]*) printf "'%s'" "${{1//\'/\'\\\'\'}}" ;;
-        *) printf '%s' "$1" ;;
-    esac
-}}
-{{ printf '+ %s' "$(basename "$0")"; for word in "$@"; do printf ' %s' "$(quote "$word")"; done; printf '\n'; }} >> {log}
-"#,
-        log = log.display()
+        "#!/bin/sh\n{{ printf '%s\\0' \"$(basename \"$0\")\" \"$@\"; printf '\\n'; }} >> '{}'\n",
+        dir.path().join("calls.log").display()
     );
     for tool in ["ssh", "rsync"] {
         let path = dir.path().join(tool);
@@ -34,6 +25,22 @@ quote() {{
         Command::new("chmod").arg("+x").arg(&path).status().unwrap();
     }
     dir
+}
+
+/// The words of each command a dry run printed, as the shell parses them (NUL-ended, one per line).
+fn parsed(dry_run: &str) -> String {
+    let mut words = String::new();
+    for line in commands(dry_run) {
+        let output = Command::new("bash")
+            .args(["-c", r#"words() { printf '%s\0' "$@"; }; eval "words $1""#, "-"])
+            .arg(line.strip_prefix("+ ").unwrap())
+            .output()
+            .unwrap();
+        assert!(output.status.success(), "bash cannot parse {line:?}");
+        words.push_str(&String::from_utf8(output.stdout).unwrap());
+        words.push('\n');
+    }
+    words
 }
 
 fn install(tools: &Path, args: &[&str]) -> Output {
@@ -62,16 +69,16 @@ fn the_dry_run_prints_what_the_installer_runs_and_runs_nothing() {
     let real = install(tools.path(), &args);
     stdout(&real);
     let executed = std::fs::read_to_string(tools.path().join("calls.log")).unwrap();
-    assert_eq!(commands(&dry), commands(&executed));
+    assert_eq!(parsed(&dry), executed, "the dry run's commands, parsed by bash, are the ones run");
 
     let dry = commands(&dry).join("\n");
     for expected in [
-        &format!("rsync -t --chmod=F755 {} nao@10.0.0.42:/home/nao/relocd/relocd", binary.display()),
+        &format!("rsync -tp --chmod=F755 {} nao@10.0.0.42:/home/nao/relocd/relocd", binary.display()),
         "models/squeezenet-half-point.int8.onnx nao@10.0.0.42:/home/nao/relocd/model.onnx",
         "--ignore-existing deploy/relocd.toml nao@10.0.0.42:/home/nao/relocd/relocd.toml",
-        "sudo install -m 0644 /home/nao/relocd/relocd.service /etc/systemd/system/relocd.service",
+        "sudo -n install -m 0644 /home/nao/relocd/relocd.service /etc/systemd/system/relocd.service",
         "After=%s",
-        "systemctl enable relocd.service && sudo systemctl restart relocd.service",
+        "systemctl enable relocd.service && sudo -n systemctl restart relocd.service",
     ] {
         assert!(dry.contains(expected), "{expected:?} missing from\n{dry}");
     }
@@ -90,9 +97,19 @@ fn the_installer_builds_unless_given_a_binary_and_uninstalls() {
     assert!(root.contains("+ ssh root@10.0.0.7 'systemctl disable --now relocd.service || true'"), "{root}");
     assert!(root.contains("rm -rf /etc/systemd/system/relocd.service /etc/systemd/system/relocd.service.d"));
     assert!(!root.contains("sudo"), "root needs no sudo");
+    let root_install =
+        stdout(&install(tools.path(), &["root@10.0.0.7", "--binary", "Cargo.toml", "--dry-run"]));
+    assert!(root_install.contains("'chown -R nao:nao /home/nao/relocd'"), "nao owns what root copied");
     assert!(!tools.path().join("calls.log").exists());
 
-    for bad in [&[][..], &["10.0.0.7", "--robot", "v7"], &["10.0.0.7", "--after", "x; reboot"], &["a", "b"]] {
+    let bad_arguments: [&[&str]; 5] = [
+        &[],
+        &["10.0.0.7", "--robot", "v7"],
+        &["10.0.0.7", "--after", "x; reboot"],
+        &["10.0.0.7", "--after", "--dry-run"],
+        &["a", "b"],
+    ];
+    for bad in bad_arguments {
         let output = install(tools.path(), bad);
         assert_eq!(output.status.code(), Some(2), "{bad:?}: {}", String::from_utf8_lossy(&output.stderr));
     }

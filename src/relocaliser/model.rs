@@ -11,7 +11,6 @@ use super::decode::RawOutput;
 use super::preprocess::InputTensor;
 use crate::geometry::Representation;
 
-/// A model file that cannot be used, or a run that failed.
 /// The instruction sets tract's kernels may use on this machine, after `TRACT_CPU_ISA`: `x86_64`
 /// alone means the generic kernels an Atom without AVX gets; `x86_64,avx,avx2,fma,…` the fast ones;
 /// `generic` where tract has no kernels of its own (32-bit x86, the Nao V5).
@@ -23,6 +22,7 @@ pub fn kernel_isa() -> String {
     }
 }
 
+/// A model file that cannot be used, or a run that failed.
 #[derive(Debug, Error)]
 pub enum ModelError {
     /// The file could not be read.
