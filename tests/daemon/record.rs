@@ -105,3 +105,17 @@ fn simulated_frames_are_recorded_with_their_true_poses() {
     let replay_source = relocd(&["record", "--source", "replay:x", "--out", "y"]).output().unwrap();
     assert!(String::from_utf8_lossy(&replay_source.stderr).contains("already recorded"));
 }
+
+#[test]
+fn a_camera_that_cannot_be_opened_stops_the_recording_with_its_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let camera = dir.path().join("no-such-camera");
+    let output = relocd(&["record", "--source", &format!("v4l:{}", camera.display()), "--count", "1"])
+        .args(["--out", dir.path().join("rec").to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(!output.status.success());
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    let expected = if cfg!(feature = "v4l") { "cannot open" } else { "--features v4l" };
+    assert!(stderr.contains("no-such-camera") && stderr.contains(expected), "{stderr}");
+}
