@@ -115,11 +115,11 @@ for robot in "${robots[@]}"; do
     result="$(compare "$scratch/generic.jsonl" "$scratch/atom.jsonl" 0 2>&1)" \
         || fail "$robot: the Atom model's output differs from the native generic kernels': $result"
     echo "equal to the native run with the same (generic) kernels: $result"
-    # The native run's own kernels (AVX/FMA on a desktop) sum in another order: float32 rounding apart (a heading from a near-degenerate
-    # atan2 moves by ~1e-4 rad), the same hypotheses.
-    result="$(compare "$scratch/native.jsonl" "$scratch/atom.jsonl" 1e-3 2>&1)" \
-        || fail "$robot: the Atom model's output differs from the native AVX run's: $result"
-    echo "equal to the native run with its own kernels within 1e-3 (m, rad, probability): $result"
+    # The native run's own kernels (AVX/FMA on a desktop) sum in another order, which can move an
+    # int8 rounding by a step: the same hypotheses, numbers a little apart (seen: 2 mm in a sigma).
+    result="$(compare "$scratch/native.jsonl" "$scratch/atom.jsonl" 0.05 2>&1)" \
+        || fail "$robot: the Atom model's output differs from the native run's: $result"
+    echo "equal to the native run with its own kernels within 0.05 (m, rad, probability): $result"
 
     # The daemon resolves no host names: static glibc would load the robot's NSS libraries for that.
     port=$((20000 + RANDOM % 20000))
