@@ -1,6 +1,7 @@
 //! Per-stage latency of one relocalisation on the calling thread: YUYV 640×480 → input tensor,
-//! inference of the built-in int8 model and of its fp32 twin, decoding and unfolding, fusing a burst of
-//! five frames, and the whole pipeline.
+//! inference of the built-in int8 model and of every committed model in `models/`, decoding and
+//! unfolding, fusing a burst of five frames, and the whole pipeline. `relocd bench` times the same
+//! stages in the shipped binary.
 
 use std::path::Path;
 
@@ -17,6 +18,24 @@ fn camera_frame() -> Frame {
     Frame::Yuyv(YuyvImage::from_rgb(&render(&sampled.scene, &camera, &sampled.settings)).unwrap())
 }
 
+/// Every ONNX model in `models/`, by file name.
+fn committed_models() -> Vec<(String, Model)> {
+    let directory = Path::new(env!("CARGO_MANIFEST_DIR")).join("models");
+    let mut files: Vec<_> = std::fs::read_dir(&directory)
+        .expect("models/ exists")
+        .filter_map(|entry| entry.ok().map(|entry| entry.path()))
+        .filter(|path| path.extension().is_some_and(|extension| extension == "onnx"))
+        .collect();
+    files.sort();
+    files
+        .into_iter()
+        .map(|path| {
+            let name = path.file_stem().unwrap().to_string_lossy().into_owned();
+            (name, Model::load(&path).unwrap_or_else(|error| panic!("{}: {error}", path.display())))
+        })
+        .collect()
+}
+
 fn stages(criterion: &mut Criterion) {
     let frame = camera_frame();
     let model = default_model().unwrap();
@@ -29,9 +48,13 @@ fn stages(criterion: &mut Criterion) {
         b.iter(|| preprocess(&frame, &model.contract().input))
     });
     group.bench_function("inference_int8_default", |b| b.iter(|| model.run(&input)));
-    let fp32 = Path::new(env!("CARGO_MANIFEST_DIR")).join("models/squeezenet-half-point.fp32.onnx");
-    if let Ok(fp32) = Model::load(&fp32) {
-        group.bench_function("inference_fp32_default", |b| b.iter(|| fp32.run(&input)));
+    for (name, committed) in committed_models() {
+        match preprocess(&frame, &committed.contract().input) {
+            Ok(input) => {
+                group.bench_function(format!("inference/{name}"), |b| b.iter(|| committed.run(&input)));
+            }
+            Err(error) => eprintln!("skipping {name}: {error}"),
+        }
     }
     group.bench_function("decode_and_unfold", |b| {
         b.iter(|| Prediction::decode(&raw, representation, 0.0).map(|prediction| prediction.hypotheses()))

@@ -3,6 +3,7 @@
 //! The library is the pure core (geometry, symmetries, renderer, recording format); the binary
 //! `relocd` is the command line on top of it.
 
+pub mod bench;
 pub mod client;
 pub mod daemon;
 pub mod eval;

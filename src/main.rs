@@ -11,6 +11,7 @@ use clap::{Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use tracing::info;
 
+use relocd::bench::Stage;
 use relocd::daemon::config::{Config, Listen, SensorInput, SourceSpec, Target};
 use relocd::geometry::{CameraIntrinsics, FieldDimensions, FieldModel, Representation};
 use relocd::protocol::message::Encoding;
@@ -49,6 +50,25 @@ enum Command {
     /// capture times and camera poses, to replay later; stops after --count frames, --seconds, or
     /// Ctrl-C.
     Record(RecordArgs),
+    /// Time each stage of a relocalisation on this machine (one thread): preprocessing a 640×480 YUYV
+    /// frame, inference, unfolding, burst fusion and a whole frame; prints the medians.
+    Bench(BenchArgs),
+}
+
+#[derive(Debug, clap::Args)]
+struct BenchArgs {
+    /// ONNX model file [default: the built-in model].
+    #[arg(long)]
+    model: Option<PathBuf>,
+    /// Print one JSON object instead of a table.
+    #[arg(long)]
+    json: bool,
+    /// Timed runs per stage.
+    #[arg(long, default_value_t = 100, value_parser = clap::value_parser!(u32).range(1..=100_000))]
+    iterations: u32,
+    /// Time only these stages (repeatable): preprocess, inference, unfold, fusion, total.
+    #[arg(long)]
+    stage: Vec<Stage>,
 }
 
 #[derive(Debug, clap::Args)]
@@ -267,6 +287,7 @@ fn main() -> ExitCode {
                 Command::Replay(args) => replay(args),
                 Command::Field(args) => field(args),
                 Command::Record(args) => record(args),
+                Command::Bench(args) => bench(args),
                 Command::Run(_) => unreachable!("handled above"),
             },
             Err(error) => Err(error),
@@ -356,6 +377,21 @@ fn record(args: RecordArgs) -> anyhow::Result<()> {
             "seconds": summary.seconds,
         })
     );
+    Ok(())
+}
+
+fn bench(args: BenchArgs) -> anyhow::Result<()> {
+    let (model, name) = match &args.model {
+        Some(path) => (Model::load(path)?, path.display().to_string()),
+        None => (relocaliser::default_model()?, format!("<built-in {}>", relocaliser::DEFAULT_MODEL_NAME)),
+    };
+    let stages = if args.stage.is_empty() { Stage::ALL.to_vec() } else { args.stage };
+    let report = relocd::bench::run(model, name, &stages, args.iterations as usize)?;
+    if args.json {
+        println!("{}", serde_json::to_string(&report).expect("the report serialises"));
+    } else {
+        print!("{report}");
+    }
     Ok(())
 }
 

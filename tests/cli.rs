@@ -281,3 +281,20 @@ fn bad_replay_options_are_rejected_with_a_reason() {
     assert!(!output.status.success());
     assert!(stderr(&output).contains("no frames with a true pose to plot"), "{}", stderr(&output));
 }
+
+#[test]
+fn bench_reports_every_stage_as_json_and_refuses_a_bad_model() {
+    let output = relocd(&["bench", "--json", "--iterations", "2"]);
+    assert!(output.status.success(), "{}", stderr(&output));
+    let report: serde_json::Value = serde_json::from_str(&stdout(&output)).unwrap();
+    assert!(report["model"].as_str().unwrap().contains("built-in"));
+    assert!(!report["isa"].as_str().unwrap().is_empty());
+    for stage in ["preprocess_ms", "inference_ms", "unfold_ms", "fusion_ms", "total_ms"] {
+        let median = report["stages"][stage].as_f64().unwrap_or_else(|| panic!("no {stage}"));
+        assert!(median >= 0.0, "{stage}: {median}");
+    }
+
+    let not_a_model = relocd(&["bench", "--model", "Cargo.toml"]);
+    assert!(!not_a_model.status.success());
+    assert!(stderr(&not_a_model).contains("Cargo.toml"), "{}", stderr(&not_a_model));
+}

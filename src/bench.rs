@@ -1,0 +1,244 @@
+//! `relocd bench`: per-stage latency medians of one relocalisation on this machine, on the calling
+//! thread, for any model: the same stages as `cargo bench --bench relocalise`, but in the shipped
+//! binary, so it runs on the robot too.
+
+use std::fmt;
+use std::str::FromStr;
+use std::time::Instant;
+
+use anyhow::Context;
+use serde::Serialize;
+
+use crate::frame::{Frame, YuyvImage};
+use crate::geometry::{Camera, CameraIntrinsics, FieldModel};
+use crate::relocaliser::{Model, Prediction, Relocaliser, fuse, kernel_isa, preprocess};
+use crate::sim::{Randomisation, render};
+
+/// Frames in the fused burst, as the daemon captures by default.
+const BURST: usize = 5;
+/// Untimed runs of each stage before measuring (caches, tract's lazy state).
+const WARM_UP: usize = 3;
+
+/// One stage of a relocalisation.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Stage {
+    /// YUYV 640×480 frame → input tensor.
+    Preprocess,
+    /// The network.
+    Inference,
+    /// Decoding the outputs and unfolding them into hypotheses.
+    Unfold,
+    /// Fusing a burst of five predictions.
+    Fusion,
+    /// A whole frame: preprocess, inference, unfold.
+    Total,
+}
+
+impl Stage {
+    /// Every stage, in pipeline order.
+    pub const ALL: [Stage; 5] =
+        [Stage::Preprocess, Stage::Inference, Stage::Unfold, Stage::Fusion, Stage::Total];
+
+    fn name(self) -> &'static str {
+        match self {
+            Stage::Preprocess => "preprocess",
+            Stage::Inference => "inference",
+            Stage::Unfold => "unfold",
+            Stage::Fusion => "fusion",
+            Stage::Total => "total",
+        }
+    }
+}
+
+impl fmt::Display for Stage {
+    fn fmt(&self, formatter: &mut fmt::Formatter<'_>) -> fmt::Result {
+        formatter.write_str(self.name())
+    }
+}
+
+impl FromStr for Stage {
+    type Err = String;
+
+    fn from_str(name: &str) -> Result<Self, Self::Err> {
+        Stage::ALL.into_iter().find(|stage| stage.name() == name).ok_or_else(|| {
+            format!("unknown stage {name:?}: expected preprocess, inference, unfold, fusion or total")
+        })
+    }
+}
+
+/// Medians of the stages measured, milliseconds (absent: not measured).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct StageMedians {
+    /// Frame → input tensor.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub preprocess_ms: Option<f64>,
+    /// The network.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub inference_ms: Option<f64>,
+    /// Decoding and unfolding.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub unfold_ms: Option<f64>,
+    /// Fusing a burst of five.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fusion_ms: Option<f64>,
+    /// A whole frame.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub total_ms: Option<f64>,
+}
+
+/// What `relocd bench --json` prints.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct BenchReport {
+    /// The model file, or `<built-in …>`.
+    pub model: String,
+    /// The instruction sets tract's kernels use here ([`kernel_isa`]).
+    pub isa: String,
+    /// The CPU, from /proc/cpuinfo where there is one.
+    pub cpu: Option<String>,
+    /// Timed runs per stage.
+    pub iterations: usize,
+    /// The frame timed: format and size.
+    pub frame: String,
+    /// Per-stage medians.
+    pub stages: StageMedians,
+}
+
+/// Times `stages` of relocalising one rendered 640×480 YUYV frame with `model`, `iterations` times
+/// each (after a short warm-up); medians in milliseconds.
+pub fn run(
+    model: Model,
+    model_name: String,
+    stages: &[Stage],
+    iterations: usize,
+) -> anyhow::Result<BenchReport> {
+    let frame = camera_frame();
+    let spec = model.contract().input.clone();
+    let input = preprocess(&frame, &spec).context("the benchmark frame does not fit the model")?;
+    let raw = model.run(&input)?;
+    let representation = model.contract().representation;
+    let prediction = Prediction::decode(&raw, representation, 0.0)?;
+    let burst = vec![prediction; BURST];
+    let relocaliser = Relocaliser::new(model);
+
+    let mut medians = StageMedians::default();
+    for &stage in stages {
+        let median = match stage {
+            Stage::Preprocess => median_ms(iterations, || drop(preprocess(&frame, &spec))),
+            Stage::Inference => median_ms(iterations, || drop(relocaliser.model().run(&input))),
+            Stage::Unfold => median_ms(iterations, || {
+                drop(Prediction::decode(&raw, representation, 0.0).map(|prediction| prediction.hypotheses()))
+            }),
+            Stage::Fusion => median_ms(iterations, || drop(fuse(&burst))),
+            Stage::Total => median_ms(iterations, || drop(relocaliser.relocalise(&frame, 0.0))),
+        };
+        let slot = match stage {
+            Stage::Preprocess => &mut medians.preprocess_ms,
+            Stage::Inference => &mut medians.inference_ms,
+            Stage::Unfold => &mut medians.unfold_ms,
+            Stage::Fusion => &mut medians.fusion_ms,
+            Stage::Total => &mut medians.total_ms,
+        };
+        *slot = Some(median);
+    }
+    let (width, height) = frame.dimensions();
+    Ok(BenchReport {
+        model: model_name,
+        isa: kernel_isa(),
+        cpu: cpu_name(),
+        iterations,
+        frame: format!("YUYV {width}x{height}"),
+        stages: medians,
+    })
+}
+
+/// A rendered top-camera frame (the criterion benchmark's frame: seed 4000, frame 0).
+fn camera_frame() -> Frame {
+    let field = FieldModel::default();
+    let sampled = Randomisation::default().sample(&field, 4000, 0, 1);
+    let camera = Camera::new(CameraIntrinsics::nao_top(), &sampled.pose, &sampled.camera);
+    let rgb = render(&sampled.scene, &camera, &sampled.settings);
+    Frame::Yuyv(YuyvImage::from_rgb(&rgb).expect("the Nao's frame width is even"))
+}
+
+/// The median of `iterations` timed runs of `work`, milliseconds.
+fn median_ms(iterations: usize, mut work: impl FnMut()) -> f64 {
+    for _ in 0..WARM_UP {
+        work();
+    }
+    let mut times: Vec<f64> = (0..iterations.max(1))
+        .map(|_| {
+            let started = Instant::now();
+            work();
+            started.elapsed().as_secs_f64() * 1000.0
+        })
+        .collect();
+    times.sort_by(f64::total_cmp);
+    median(&times)
+}
+
+fn median(sorted: &[f64]) -> f64 {
+    let middle = sorted.len() / 2;
+    if sorted.len() % 2 == 0 { (sorted[middle - 1] + sorted[middle]) / 2.0 } else { sorted[middle] }
+}
+
+fn cpu_name() -> Option<String> {
+    let cpuinfo = std::fs::read_to_string("/proc/cpuinfo").ok()?;
+    let line = cpuinfo.lines().find(|line| line.starts_with("model name"))?;
+    Some(line.split_once(':')?.1.trim().to_owned())
+}
+
+impl fmt::Display for BenchReport {
+    fn fmt(&self, formatter: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(formatter, "model   {}", self.model)?;
+        writeln!(
+            formatter,
+            "cpu     {} (tract kernels: {})",
+            self.cpu.as_deref().unwrap_or("unknown"),
+            self.isa
+        )?;
+        writeln!(formatter, "frame   {}, medians of {} runs, one thread", self.frame, self.iterations)?;
+        let stages = [
+            ("preprocess", self.stages.preprocess_ms),
+            ("inference", self.stages.inference_ms),
+            ("unfold", self.stages.unfold_ms),
+            ("fusion (burst of 5)", self.stages.fusion_ms),
+            ("total (one frame)", self.stages.total_ms),
+        ];
+        for (name, median) in stages {
+            if let Some(median) = median {
+                writeln!(formatter, "{name:<20} {median:>10.4} ms")?;
+            }
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn medians_of_odd_and_even_counts() {
+        assert_eq!(median(&[1.0, 2.0, 9.0]), 2.0);
+        assert_eq!(median(&[1.0, 2.0, 4.0, 9.0]), 3.0);
+    }
+
+    #[test]
+    fn stages_parse_by_name() {
+        for stage in Stage::ALL {
+            assert_eq!(stage.to_string().parse::<Stage>().unwrap(), stage);
+        }
+        assert!("decode".parse::<Stage>().is_err());
+    }
+
+    #[test]
+    fn the_report_has_the_requested_stages_only() {
+        let model = crate::relocaliser::default_model().unwrap();
+        let report = run(model, "built-in".into(), &[Stage::Unfold, Stage::Fusion], 2).unwrap();
+        let json = serde_json::to_value(&report).unwrap();
+        let stages = json["stages"].as_object().unwrap();
+        assert_eq!(stages.keys().collect::<Vec<_>>(), ["fusion_ms", "unfold_ms"]);
+        assert!(stages.values().all(|value| value.as_f64().unwrap() >= 0.0));
+        assert_eq!(json["isa"], kernel_isa());
+    }
+}
