@@ -103,15 +103,16 @@ pub struct BenchReport {
     pub stages: StageMedians,
 }
 
-/// Times `stages` of relocalising one rendered 640×480 YUYV frame with `model`, `iterations` times
-/// each (after a short warm-up); medians in milliseconds.
+/// Times `stages` of relocalising `frame` (default: a rendered 640×480 YUYV top-camera frame) with
+/// `model`, `iterations` times each (after a short warm-up); medians in milliseconds.
 pub fn run(
     model: Model,
     model_name: String,
+    frame: Option<Frame>,
     stages: &[Stage],
     iterations: usize,
 ) -> anyhow::Result<BenchReport> {
-    let frame = camera_frame();
+    let frame = frame.unwrap_or_else(camera_frame);
     let spec = model.contract().input.clone();
     let input = preprocess(&frame, &spec).context("the benchmark frame does not fit the model")?;
     let raw = model.run(&input)?;
@@ -141,12 +142,13 @@ pub fn run(
         *slot = Some(median);
     }
     let (width, height) = frame.dimensions();
+    let format = if matches!(frame, Frame::Yuyv(_)) { "YUYV" } else { "RGB" };
     Ok(BenchReport {
         model: model_name,
         isa: kernel_isa(),
         cpu: cpu_name(),
         iterations,
-        frame: format!("YUYV {width}x{height}"),
+        frame: format!("{format} {width}x{height}"),
         stages: medians,
     })
 }
@@ -234,7 +236,7 @@ mod tests {
     #[test]
     fn the_report_has_the_requested_stages_only() {
         let model = crate::relocaliser::default_model().unwrap();
-        let report = run(model, "built-in".into(), &[Stage::Unfold, Stage::Fusion], 2).unwrap();
+        let report = run(model, "built-in".into(), None, &[Stage::Unfold, Stage::Fusion], 2).unwrap();
         let json = serde_json::to_value(&report).unwrap();
         let stages = json["stages"].as_object().unwrap();
         assert_eq!(stages.keys().collect::<Vec<_>>(), ["fusion_ms", "unfold_ms"]);

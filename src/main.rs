@@ -69,6 +69,9 @@ struct BenchArgs {
     /// Time only these stages (repeatable): preprocess, inference, unfold, fusion, total.
     #[arg(long)]
     stage: Vec<Stage>,
+    /// Relocalise this image (PNG or JPEG) instead of a rendered 640×480 YUYV frame.
+    #[arg(long)]
+    frame: Option<PathBuf>,
 }
 
 #[derive(Debug, clap::Args)]
@@ -385,8 +388,15 @@ fn bench(args: BenchArgs) -> anyhow::Result<()> {
         Some(path) => (Model::load(path)?, path.display().to_string()),
         None => (relocaliser::default_model()?, format!("<built-in {}>", relocaliser::DEFAULT_MODEL_NAME)),
     };
+    let frame = match &args.frame {
+        Some(path) => {
+            let image = image::open(path).with_context(|| format!("--frame {}", path.display()))?;
+            Some(relocd::frame::Frame::Rgb(image.to_rgb8()))
+        }
+        None => None,
+    };
     let stages = if args.stage.is_empty() { Stage::ALL.to_vec() } else { args.stage };
-    let report = relocd::bench::run(model, name, &stages, args.iterations as usize)?;
+    let report = relocd::bench::run(model, name, frame, &stages, args.iterations as usize)?;
     if args.json {
         println!("{}", serde_json::to_string(&report).expect("the report serialises"));
     } else {

@@ -294,6 +294,13 @@ fn bench_reports_every_stage_as_json_and_refuses_a_bad_model() {
         assert!(median >= 0.0, "{stage}: {median}");
     }
 
+    let frame = "models/fixtures/parity/test-seed3000-000000.png";
+    let own_frame =
+        relocd(&["bench", "--json", "--iterations", "1", "--stage", "inference", "--frame", frame]);
+    let report: serde_json::Value = serde_json::from_str(&stdout(&own_frame)).unwrap();
+    assert_eq!(report["frame"], "RGB 160x120");
+    assert_eq!(report["stages"].as_object().unwrap().len(), 1);
+
     let not_a_model = relocd(&["bench", "--model", "Cargo.toml"]);
     assert!(!not_a_model.status.success());
     assert!(stderr(&not_a_model).contains("Cargo.toml"), "{}", stderr(&not_a_model));
