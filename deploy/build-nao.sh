@@ -25,9 +25,10 @@ esac
 # the environment are replaced, not extended, for the same reason.
 export RUSTFLAGS="-C target-cpu=$cpu -C target-feature=+crt-static"
 # --target is required: it keeps RUSTFLAGS away from build scripts and proc-macros, which run here.
-cargo build --locked --release --target "$target" --no-default-features --features v4l >&2
+# The `nao` profile (Cargo.toml): release with fat LTO in one codegen unit, for size.
+cargo build --locked --profile nao --target "$target" --no-default-features --features v4l >&2
 
-binary="${CARGO_TARGET_DIR:-target}/$target/release/relocd"
+binary="${CARGO_TARGET_DIR:-target}/$target/nao/relocd"
 strip "$binary"
 if ! file_type="$(file -b "$binary" 2>/dev/null)"; then
     file_type="(file(1) not installed)"

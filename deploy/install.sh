@@ -94,7 +94,7 @@ if [ -z "$binary" ]; then
         run deploy/build-nao.sh "$robot"
         triple=x86_64-unknown-linux-gnu
         [ "$robot" = v6 ] || triple=i686-unknown-linux-gnu
-        binary="${CARGO_TARGET_DIR:-target}/$triple/release/relocd"
+        binary="${CARGO_TARGET_DIR:-target}/$triple/nao/relocd"
     else
         printf '+ deploy/build-nao.sh %s\n' "$robot"
         binary="$(deploy/build-nao.sh "$robot")"

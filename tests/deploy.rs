@@ -90,7 +90,7 @@ fn the_installer_builds_unless_given_a_binary_and_uninstalls() {
     let dry = stdout(&install(tools.path(), &["10.0.0.7", "--robot", "v5", "--dry-run"]));
     let dry = commands(&dry);
     assert_eq!(dry[0], "+ deploy/build-nao.sh v5");
-    assert!(dry[2].contains("i686-unknown-linux-gnu/release/relocd nao@10.0.0.7:"), "{dry:?}");
+    assert!(dry[2].contains("i686-unknown-linux-gnu/nao/relocd nao@10.0.0.7:"), "{dry:?}");
     assert!(!dry.join("\n").contains("After="), "no ordering drop-in without --after");
 
     let root = stdout(&install(tools.path(), &["root@10.0.0.7", "--uninstall", "--dry-run"]));
