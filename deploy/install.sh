@@ -10,7 +10,7 @@
 #   --uninstall    stop and remove the unit and the installed files (keeps relocd.toml and recordings)
 #   --robot        v6 (default) or v5: which static binary deploy/build-nao.sh builds
 #   --binary FILE  install this binary instead of building one
-#   --model FILE   the ONNX model (default: models/squeezenet-half-point.int8.onnx, the built-in one)
+#   --model FILE   the ONNX model (default: models/squeezenet-half-point.w8.onnx, the built-in one)
 #   --config FILE  the config, replacing the robot's (default: deploy/relocd.toml, only if the robot
 #                  has none yet, so edits made on the robot survive a reinstall)
 #   --after UNIT   start relocd after your own service (and the camera), e.g. --after hulk.service
@@ -50,7 +50,7 @@ for name in binary model config; do
     [ -z "${!name}" ] || printf -v "$name" '%s' "$(realpath -m -- "${!name}")"
 done
 cd "$repository"
-model="${model:-models/squeezenet-half-point.int8.onnx}"
+model="${model:-models/squeezenet-half-point.w8.onnx}"
 config="${config:-deploy/relocd.toml}"
 case "$robot" in v6|v5) ;; *) echo "--robot $robot: expected v6 or v5" >&2; exit 2 ;; esac
 case "$after" in *[!A-Za-z0-9@._:-]*) echo "--after $after: not a unit name" >&2; exit 2 ;; esac

@@ -19,17 +19,17 @@ import numpy as np
 import onnx
 import onnxruntime
 import torch
-from onnxruntime.quantization import CalibrationDataReader, QuantFormat, QuantType, quantize_static
+from onnxruntime.quantization import QuantFormat, QuantType, quantize_static
 from onnxruntime.quantization.shape_inference import quant_pre_process
 from PIL import Image
 
 from relocnet.data import load_recording
 from relocnet.nets import Exported, RelocNet, output_names
+from relocnet.onnxfile import MEAN, SCALE, STD, Frames, normalise, with_contract
 
 MODELS = Path(__file__).resolve().parent
 REPO = MODELS.parent
 PARITY_FRAMES = MODELS / "fixtures" / "parity"
-MEAN, STD, SCALE = [0.5, 0.5, 0.5], [0.25, 0.25, 0.25], 1.0 / 255.0
 OUTPUT_MEANINGS = {
     "position": "camera ground position (x, y) in the folded field, metres, field frame",
     "heading": "camera ground heading in the folded field as (cos, sin); includes the head yaw",
@@ -37,20 +37,6 @@ OUTPUT_MEANINGS = {
     "position_sigma": "predicted standard deviation of the position, metres",
     "heading_kappa": "predicted von Mises concentration of the heading",
 }
-
-
-def normalise(images_uint8):
-    """uint8 NHWC -> float32 NCHW, the contract's normalisation."""
-    x = images_uint8.astype(np.float32).transpose(0, 3, 1, 2) * SCALE
-    return ((x - np.array(MEAN, np.float32)[:, None, None]) / np.array(STD, np.float32)[:, None, None]).astype(np.float32)
-
-
-class Frames(CalibrationDataReader):
-    def __init__(self, images):
-        self.batches = iter([{"image": normalise(images[i : i + 1])} for i in range(len(images))])
-
-    def get_next(self):
-        return next(self.batches, None)
 
 
 def contract(args, log, representation, name, quantisation):
@@ -76,14 +62,6 @@ def contract(args, log, representation, name, quantisation):
             "quantisation": quantisation,
         },
     }
-
-
-def with_contract(path, document):
-    model = onnx.load(path)
-    del model.metadata_props[:]
-    entry = model.metadata_props.add()
-    entry.key, entry.value = "relocd.contract", json.dumps(document)
-    onnx.save(model, path)
 
 
 def last_gemm(path):

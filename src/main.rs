@@ -211,7 +211,7 @@ struct RenderArgs {
 struct ReplayArgs {
     /// Recording directory (frames.jsonl and frames); default: the sample recording in tests/data/sample.
     recording: Option<PathBuf>,
-    /// ONNX model file; default: the built-in int8 SqueezeNet half-point model.
+    /// ONNX model file; default: the built-in SqueezeNet half-point model.
     #[arg(long)]
     model: Option<PathBuf>,
     /// Write the metrics as JSON to this file.

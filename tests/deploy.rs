@@ -74,7 +74,7 @@ fn the_dry_run_prints_what_the_installer_runs_and_runs_nothing() {
     let dry = commands(&dry).join("\n");
     for expected in [
         &format!("rsync -tp --chmod=F755 {} nao@10.0.0.42:/home/nao/relocd/relocd", binary.display()),
-        "models/squeezenet-half-point.int8.onnx nao@10.0.0.42:/home/nao/relocd/model.onnx",
+        "models/squeezenet-half-point.w8.onnx nao@10.0.0.42:/home/nao/relocd/model.onnx",
         "--ignore-existing deploy/relocd.toml nao@10.0.0.42:/home/nao/relocd/relocd.toml",
         "sudo -n install -m 0644 /home/nao/relocd/relocd.service /etc/systemd/system/relocd.service",
         "After=%s",

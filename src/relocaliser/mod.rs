@@ -17,11 +17,13 @@ pub use pipeline::{Relocalisation, RelocaliseError, Relocaliser, Timings};
 pub use preprocess::{InputTensor, PreprocessError, preprocess};
 pub use prior::PlacementPrior;
 
-/// File name of the default model (the int8 SqueezeNet half-point net) in `models/`.
-pub const DEFAULT_MODEL_NAME: &str = "squeezenet-half-point.int8.onnx";
+/// File name of the default model in `models/`: the SqueezeNet half-point net with int8 weights and
+/// fp32 activations, the form tract runs fastest on both its AVX2 and its generic (Atom) kernels
+/// (BENCHMARKS.md, "Model forms").
+pub const DEFAULT_MODEL_NAME: &str = "squeezenet-half-point.w8.onnx";
 
 /// The default model, built into the binary so that relocd runs with no files beside it.
-pub const DEFAULT_MODEL: &[u8] = include_bytes!("../../models/squeezenet-half-point.int8.onnx");
+pub const DEFAULT_MODEL: &[u8] = include_bytes!("../../models/squeezenet-half-point.w8.onnx");
 
 /// Loads the built-in default model.
 pub fn default_model() -> Result<Model, ModelError> {
