@@ -11,7 +11,7 @@ use serde::Serialize;
 
 use crate::frame::{Frame, YuyvImage};
 use crate::geometry::{Camera, CameraIntrinsics, FieldModel};
-use crate::relocaliser::{Model, Prediction, Relocaliser, fuse, kernel_isa, preprocess};
+use crate::relocaliser::{Backend, Model, Prediction, Relocaliser, fuse, kernel_isa, preprocess};
 use crate::sim::{Randomisation, render};
 
 /// Frames in the fused burst, as the daemon captures by default.
@@ -91,6 +91,8 @@ pub struct StageMedians {
 pub struct BenchReport {
     /// The model file, or `<built-in …>`.
     pub model: String,
+    /// The inference engine.
+    pub backend: Backend,
     /// The instruction sets tract's kernels use here ([`kernel_isa`]).
     pub isa: String,
     /// The CPU, from /proc/cpuinfo where there is one.
@@ -119,6 +121,7 @@ pub fn run(
     let representation = model.contract().representation;
     let prediction = Prediction::decode(&raw, representation, 0.0)?;
     let burst = vec![prediction; BURST];
+    let backend = model.backend();
     let relocaliser = Relocaliser::new(model);
 
     let mut medians = StageMedians::default();
@@ -145,6 +148,7 @@ pub fn run(
     let format = if matches!(frame, Frame::Yuyv(_)) { "YUYV" } else { "RGB" };
     Ok(BenchReport {
         model: model_name,
+        backend,
         isa: kernel_isa(),
         cpu: cpu_name(),
         iterations,
@@ -191,7 +195,7 @@ fn cpu_name() -> Option<String> {
 
 impl fmt::Display for BenchReport {
     fn fmt(&self, formatter: &mut fmt::Formatter<'_>) -> fmt::Result {
-        writeln!(formatter, "model   {}", self.model)?;
+        writeln!(formatter, "model   {} ({})", self.model, self.backend)?;
         writeln!(
             formatter,
             "cpu     {} (tract kernels: {})",

@@ -17,7 +17,7 @@ use relocd::geometry::{CameraIntrinsics, FieldDimensions, FieldModel, Representa
 use relocd::protocol::message::Encoding;
 use relocd::record::RecordOptions;
 use relocd::recording::{FrameFormat, Recording};
-use relocd::relocaliser::{self, Model, PlacementPrior, Relocaliser};
+use relocd::relocaliser::{self, Backend, LoadOptions, PlacementPrior, Relocaliser};
 use relocd::replay::ReplayOptions;
 use relocd::sim::{DatasetSpec, Randomisation, render_dataset};
 
@@ -60,6 +60,10 @@ struct BenchArgs {
     /// ONNX model file [default: the built-in model].
     #[arg(long)]
     model: Option<PathBuf>,
+    /// Inference engine: tract (built in) or onnxruntime (needs the onnxruntime feature and
+    /// libonnxruntime.so; ORT_DYLIB_PATH names the file). Each has its own built-in model.
+    #[arg(long, value_enum)]
+    backend: Option<Backend>,
     /// Print one JSON object instead of a table.
     #[arg(long)]
     json: bool,
@@ -110,6 +114,10 @@ struct RunArgs {
     /// ONNX model file [default: the built-in model].
     #[arg(long)]
     model: Option<PathBuf>,
+    /// Inference engine: tract (built in) or onnxruntime (needs the onnxruntime feature and
+    /// libonnxruntime.so; ORT_DYLIB_PATH names the file). Each has its own built-in model.
+    #[arg(long, value_enum)]
+    backend: Option<Backend>,
     /// Decode the model's outputs in this representation instead of its contract's.
     #[arg(long)]
     representation: Option<Representation>,
@@ -214,6 +222,10 @@ struct ReplayArgs {
     /// ONNX model file; default: the built-in SqueezeNet half-point model.
     #[arg(long)]
     model: Option<PathBuf>,
+    /// Inference engine: tract (built in) or onnxruntime (needs the onnxruntime feature and
+    /// libonnxruntime.so; ORT_DYLIB_PATH names the file). Each has its own built-in model.
+    #[arg(long, value_enum)]
+    backend: Option<Backend>,
     /// Write the metrics as JSON to this file.
     #[arg(long)]
     metrics_json: Option<PathBuf>,
@@ -321,9 +333,11 @@ fn run(args: RunArgs, log_level: Option<String>) -> anyhow::Result<()> {
         Some(path) => Config::load(path)?,
         None => Config::default(),
     };
-    let RunArgs { source, model, representation, team, player, gc_port, sensors, control, .. } = args;
+    let RunArgs { source, model, backend, representation, team, player, gc_port, sensors, control, .. } =
+        args;
     config.source = source.unwrap_or(config.source);
     config.model = model.or(config.model);
+    config.backend = backend.unwrap_or(config.backend);
     config.representation = representation.or(config.representation);
     config.team = team.or(config.team);
     config.player = player.or(config.player);
@@ -384,10 +398,8 @@ fn record(args: RecordArgs) -> anyhow::Result<()> {
 }
 
 fn bench(args: BenchArgs) -> anyhow::Result<()> {
-    let (model, name) = match &args.model {
-        Some(path) => (Model::load(path)?, path.display().to_string()),
-        None => (relocaliser::default_model()?, format!("<built-in {}>", relocaliser::DEFAULT_MODEL_NAME)),
-    };
+    let options = LoadOptions { backend: args.backend.unwrap_or_default(), representation: None };
+    let (model, name) = relocaliser::load_model(args.model.as_deref(), options)?;
     let frame = match &args.frame {
         Some(path) => {
             let image = image::open(path).with_context(|| format!("--frame {}", path.display()))?;
@@ -508,10 +520,8 @@ fn replay(args: ReplayArgs) -> anyhow::Result<()> {
             directory.display()
         )
     })?;
-    let model = match &args.model {
-        Some(path) => Model::load(path)?,
-        None => relocaliser::default_model()?,
-    };
+    let options = LoadOptions { backend: args.backend.unwrap_or_default(), representation: None };
+    let (model, _) = relocaliser::load_model(args.model.as_deref(), options)?;
     let contract = model.contract();
     info!(
         model = %contract.model_id,

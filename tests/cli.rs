@@ -282,12 +282,43 @@ fn bad_replay_options_are_rejected_with_a_reason() {
     assert!(stderr(&output).contains("no frames with a true pose to plot"), "{}", stderr(&output));
 }
 
+/// Without the `onnxruntime` feature, `--backend onnxruntime` says how to get it; with it, a library
+/// that cannot be loaded is named. Either way an error, not a panic.
+#[test]
+fn an_unavailable_onnxruntime_backend_is_refused_with_a_reason() {
+    let output = Command::new(env!("CARGO_BIN_EXE_relocd"))
+        .args(["bench", "--backend", "onnxruntime", "--iterations", "1", "--stage", "inference"])
+        .env("ORT_DYLIB_PATH", "/nonexistent/libonnxruntime.so")
+        .output()
+        .unwrap();
+    assert_eq!(output.status.code(), Some(1), "{}", stderr(&output));
+    let expected = if cfg!(feature = "onnxruntime") {
+        "cannot load ONNX Runtime from /nonexistent/libonnxruntime.so"
+    } else {
+        "built without ONNX Runtime (cargo build --features onnxruntime)"
+    };
+    assert!(stderr(&output).contains(expected), "{}", stderr(&output));
+}
+
+/// With ONNX Runtime (ORT_DYLIB_PATH set, as .ci/run does), the built-in model is its int8 QDQ form.
+#[cfg(feature = "onnxruntime")]
+#[test]
+fn bench_runs_the_onnxruntime_backend_on_its_own_built_in_model() {
+    let output = relocd(&["bench", "--backend", "onnxruntime", "--json", "--iterations", "2"]);
+    assert!(output.status.success(), "{}", stderr(&output));
+    let report: serde_json::Value = serde_json::from_str(&stdout(&output)).unwrap();
+    assert_eq!(report["backend"], "onnxruntime");
+    assert_eq!(report["model"], "<built-in squeezenet-half-point.int8.onnx>");
+    assert!(report["stages"]["total_ms"].as_f64().unwrap() > 0.0);
+}
+
 #[test]
 fn bench_reports_every_stage_as_json_and_refuses_a_bad_model() {
     let output = relocd(&["bench", "--json", "--iterations", "2"]);
     assert!(output.status.success(), "{}", stderr(&output));
     let report: serde_json::Value = serde_json::from_str(&stdout(&output)).unwrap();
     assert!(report["model"].as_str().unwrap().contains("built-in"));
+    assert_eq!(report["backend"], "tract");
     assert!(!report["isa"].as_str().unwrap().is_empty());
     for stage in ["preprocess_ms", "inference_ms", "unfold_ms", "fusion_ms", "total_ms"] {
         let median = report["stages"][stage].as_f64().unwrap_or_else(|| panic!("no {stage}"));

@@ -1,12 +1,13 @@
-//! Loading ONNX models with tract: the contract is checked, broken files give clear errors, and the
-//! committed models match onnxruntime's outputs (the parity fixtures written at export time).
+//! Loading ONNX models: the contract is checked, broken files give clear errors, and the committed
+//! models match onnxruntime's outputs (the parity fixtures written at export time) in tract, and in the
+//! ONNX Runtime backend when the `onnxruntime` feature is on.
 
 use std::path::{Path, PathBuf};
 
 use image::RgbImage;
 use relocd::frame::Frame;
 use relocd::geometry::{Representation, Symmetry};
-use relocd::relocaliser::{Model, Relocaliser, default_model, preprocess};
+use relocd::relocaliser::{Backend, LoadOptions, Model, Relocaliser, default_model, preprocess};
 
 fn models() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("models")
@@ -87,6 +88,20 @@ fn the_built_in_default_model_loads() {
 /// tract's outputs on the parity frames equal onnxruntime's, within the fixture's tolerance.
 #[test]
 fn committed_models_match_onnxruntime() {
+    check_parity(Backend::Tract, None);
+}
+
+/// The ONNX Runtime backend reproduces the fixture (written by onnxruntime's Python API) to float
+/// precision: it checks the wiring (input name, output order, shapes), not the arithmetic.
+#[cfg(feature = "onnxruntime")]
+#[test]
+fn the_onnxruntime_backend_matches_the_parity_fixtures() {
+    check_parity(Backend::Onnxruntime, Some(1e-5));
+}
+
+/// Runs every form of every model with a parity fixture through `backend` and compares with the
+/// fixture's outputs, within `tolerance` or the fixture's own.
+fn check_parity(backend: Backend, tolerance: Option<f64>) {
     let parity = models().join("fixtures/parity");
     let mut checked = 0;
     for entry in std::fs::read_dir(&parity).unwrap() {
@@ -101,8 +116,9 @@ fn committed_models_match_onnxruntime() {
         for kind in fixture["frames"][0]["outputs"].as_object().unwrap().keys() {
             let model_path = models().join(format!("{name}.{kind}.onnx"));
             assert!(model_path.exists(), "{name}.json has outputs for a missing {model_path:?}");
-            let tolerance = fixture["tolerance"][kind.as_str()].as_f64().unwrap();
-            let model = Model::load(&model_path).unwrap();
+            let tolerance =
+                tolerance.unwrap_or_else(|| fixture["tolerance"][kind.as_str()].as_f64().unwrap());
+            let model = Model::load_with(&model_path, LoadOptions { backend, representation: None }).unwrap();
             for frame in fixture["frames"].as_array().unwrap() {
                 let image = image::open(parity.join(frame["file"].as_str().unwrap())).unwrap().into_rgb8();
                 let input = preprocess(&Frame::Rgb(image), &model.contract().input).unwrap();
@@ -123,7 +139,7 @@ fn committed_models_match_onnxruntime() {
                         let scale = reference.abs().max(1.0);
                         assert!(
                             (f64::from(*value) - reference).abs() <= tolerance * scale,
-                            "{name}.{kind} {output} on {}: tract {value}, onnxruntime {reference}",
+                            "{name}.{kind} {output} on {}: {backend} {value}, onnxruntime {reference}",
                             frame["file"]
                         );
                     }

@@ -11,6 +11,7 @@ use thiserror::Error;
 
 use crate::geometry::Representation;
 use crate::protocol::message::Encoding;
+use crate::relocaliser::Backend;
 
 /// A configuration that cannot be used.
 #[derive(Debug, Error)]
@@ -49,8 +50,10 @@ pub struct Config {
     pub log_level: String,
     /// Where frames come from.
     pub source: SourceSpec,
-    /// ONNX model file; absent: the model built into the binary.
+    /// ONNX model file; absent: the model built into the binary for `backend`.
     pub model: Option<PathBuf>,
+    /// Inference engine: tract (built in) or onnxruntime (the `onnxruntime` feature).
+    pub backend: Backend,
     /// Decode the model's outputs in this representation instead of the one its contract names.
     pub representation: Option<Representation>,
     /// Our team number, as the GameController knows it; absent: the penalty trigger is off.
@@ -85,6 +88,7 @@ impl Default for Config {
             log_level: "info".into(),
             source: SourceSpec::V4l(PathBuf::from("/dev/video-top")),
             model: None,
+            backend: Backend::default(),
             representation: None,
             team: None,
             player: None,
@@ -568,6 +572,7 @@ mod tests {
             sensors = "lola:/tmp/robocup"
             control = "udp:127.0.0.1:5001"
             representation = "quarter"
+            backend = "onnxruntime"
             [publish]
             targets = ["udp:127.0.0.1:5000", "unix:/tmp/loc"]
             encoding = "msgpack"
@@ -580,6 +585,7 @@ mod tests {
         assert_eq!(config.sensors, SensorInput::Lola("/tmp/robocup".into()));
         assert_eq!(config.control, Listen::Udp("127.0.0.1:5001".parse().unwrap()));
         assert_eq!(config.representation, Some(Representation::Quarter));
+        assert_eq!(config.backend, Backend::Onnxruntime);
         assert_eq!(config.publish.encoding, Encoding::Msgpack);
         assert_eq!(config.publish.targets[1], Target::Unix("/tmp/loc".into()));
         assert!(!config.replay.looping);
@@ -598,6 +604,7 @@ mod tests {
         assert!(message("[camera]\nfps = \"fast\"").contains("fps"));
         assert!(message("source = ").contains("relocd.toml"));
         assert!(message("[camera]\nheight = 0").contains("camera.height"));
+        assert!(message("backend = \"cuda\"").contains("tract"), "{}", message("backend = \"cuda\""));
         assert!(message("control = \"unix:/tmp/x\"\nsensors = \"unix:/tmp/x\"").contains("different"));
     }
 

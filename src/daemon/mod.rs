@@ -30,7 +30,7 @@ use crate::geometry::FieldModel;
 use crate::posture::{PostureConfig, PostureDetector};
 use crate::protocol::gamecontroller::PenaltyWatch;
 use crate::recording::Recording;
-use crate::relocaliser::{self, Model, Relocaliser};
+use crate::relocaliser::{self, Backend, LoadOptions, Model, Relocaliser};
 
 /// Triggers waiting for the relocalisation thread before new ones are refused.
 const TRIGGER_QUEUE: usize = 64;
@@ -39,21 +39,20 @@ const TRIGGER_QUEUE: usize = 64;
 pub fn run(config: Config) -> anyhow::Result<()> {
     config.validate()?;
     apply_process_settings(&config)?;
-    let model = match &config.model {
-        Some(path) => Model::load_as(path, config.representation)?,
-        None => Model::from_bytes_as(
-            relocaliser::DEFAULT_MODEL,
-            &format!("<built-in {}>", relocaliser::DEFAULT_MODEL_NAME),
-            config.representation,
-        )?,
-    };
+    let options = LoadOptions { backend: config.backend, representation: config.representation };
+    let (model, _) = relocaliser::load_model(config.model.as_deref(), options)?;
     let contract = model.contract();
-    info!(
-        "model {} ({}), tract kernels for {}",
-        contract.model_id,
-        contract.representation,
-        relocaliser::kernel_isa()
-    );
+    match config.backend {
+        Backend::Tract => info!(
+            "model {} ({}), tract kernels for {}",
+            contract.model_id,
+            contract.representation,
+            relocaliser::kernel_isa()
+        ),
+        Backend::Onnxruntime => {
+            info!("model {} ({}), ONNX Runtime", contract.model_id, contract.representation)
+        }
+    }
     let status = Arc::new(Status::new(config.source.to_string(), contract.model_id.clone()));
     let publisher = Publisher::new(config.publish.targets.clone(), config.publish.encoding)
         .context("cannot create the publishing sockets")?;

@@ -1,8 +1,11 @@
-//! Loading and running an ONNX relocaliser with tract. tract stays inside this file.
+//! Loading and running an ONNX relocaliser: with tract (built in), or with ONNX Runtime (cargo feature
+//! `onnxruntime`). tract stays inside this file.
 
+use std::fmt;
 use std::path::Path;
 use std::sync::Arc;
 
+use serde::{Deserialize, Serialize};
 use thiserror::Error;
 use tract_onnx::prelude::*;
 
@@ -20,6 +23,36 @@ pub fn kernel_isa() -> String {
         Some(_) => format!("{isa:?}"),
         None => "generic".into(),
     }
+}
+
+/// The inference engine that runs a model.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum Backend {
+    /// tract: pure Rust, no library needed; the static robot build's engine.
+    #[default]
+    Tract,
+    /// ONNX Runtime, loaded from `libonnxruntime.so` at run time (needs the `onnxruntime` feature).
+    Onnxruntime,
+}
+
+impl fmt::Display for Backend {
+    fn fmt(&self, formatter: &mut fmt::Formatter) -> fmt::Result {
+        formatter.write_str(match self {
+            Backend::Tract => "tract",
+            Backend::Onnxruntime => "onnxruntime",
+        })
+    }
+}
+
+/// How to load a model.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct LoadOptions {
+    /// The engine that runs it.
+    pub backend: Backend,
+    /// Decode the outputs in this representation instead of the contract's (the graph must then have
+    /// that representation's outputs).
+    pub representation: Option<Representation>,
 }
 
 /// A model file that cannot be used, or a run that failed.
@@ -49,6 +82,14 @@ pub enum ModelError {
         /// What is wrong.
         error: ContractError,
     },
+    /// The chosen engine is not available.
+    #[error("model {source_name}: {reason}")]
+    Backend {
+        /// Where the bytes came from.
+        source_name: String,
+        /// Why the engine cannot be used.
+        reason: String,
+    },
     /// The graph does not match its contract (names, shapes) or tract cannot build it.
     #[error("model {source_name}: {reason}")]
     Graph {
@@ -66,35 +107,45 @@ pub enum ModelError {
 #[derive(Debug)]
 pub struct Model {
     contract: ModelContract,
-    plan: Arc<TypedRunnableModel>,
-    /// For each of the contract's required outputs, its index among the graph's outputs.
-    output_indices: Vec<usize>,
+    engine: Engine,
+}
+
+/// The network, ready to run in the chosen engine.
+#[derive(Debug)]
+enum Engine {
+    Tract {
+        plan: Arc<TypedRunnableModel>,
+        /// For each of the contract's required outputs, its index among the graph's outputs.
+        output_indices: Vec<usize>,
+    },
+    #[cfg(feature = "onnxruntime")]
+    Onnxruntime(super::onnxruntime::OnnxRuntimeSession),
 }
 
 impl Model {
-    /// Loads and checks a model file.
+    /// Loads and checks a model file for tract.
     pub fn load(path: &Path) -> Result<Self, ModelError> {
-        Self::load_as(path, None)
+        Self::load_with(path, LoadOptions::default())
     }
 
-    /// Loads a model file, decoding in `representation` when given (see [`Model::from_bytes_as`]).
-    pub fn load_as(path: &Path, representation: Option<Representation>) -> Result<Self, ModelError> {
+    /// Loads and checks a model file with `options`.
+    pub fn load_with(path: &Path, options: LoadOptions) -> Result<Self, ModelError> {
         let bytes = std::fs::read(path)
             .map_err(|source| ModelError::Read { path: path.display().to_string(), source })?;
-        Self::from_bytes_as(&bytes, &path.display().to_string(), representation)
+        Self::from_bytes_with(&bytes, &path.display().to_string(), options)
     }
 
-    /// Loads and checks a model from memory; `source_name` names it in errors.
+    /// Loads and checks a model from memory for tract; `source_name` names it in errors.
     pub fn from_bytes(bytes: &[u8], source_name: &str) -> Result<Self, ModelError> {
-        Self::from_bytes_as(bytes, source_name, None)
+        Self::from_bytes_with(bytes, source_name, LoadOptions::default())
     }
 
-    /// Like [`Model::from_bytes`], but decodes the outputs in `representation` instead of the one
-    /// the contract names (the graph must then have that representation's outputs).
-    pub fn from_bytes_as(
+    /// Loads and checks a model from memory with `options`. The contract and the graph's inputs and
+    /// outputs are checked the same way whichever engine runs it.
+    pub fn from_bytes_with(
         bytes: &[u8],
         source_name: &str,
-        representation: Option<Representation>,
+        options: LoadOptions,
     ) -> Result<Self, ModelError> {
         let source_name = source_name.to_string();
         let graph_error = |reason: String| ModelError::Graph { source_name: source_name.clone(), reason };
@@ -120,7 +171,7 @@ impl Model {
             })?;
         let mut contract = ModelContract::from_json(&contract_text)
             .map_err(|error| ModelError::Contract { source_name: source_name.clone(), error })?;
-        if let Some(representation) = representation {
+        if let Some(representation) = options.representation {
             contract.representation = representation;
         }
 
@@ -149,20 +200,47 @@ impl Model {
             })
             .collect::<Result<Vec<_>, _>>()?;
 
-        let shape = contract.input.shape.clone();
-        let plan = model
-            .with_input_fact(0, f32::fact(&shape).into())
-            .and_then(|model| model.into_optimized())
-            .and_then(|model| model.into_runnable())
-            .map_err(|error| {
-                graph_error(format!("cannot build the network for input {shape:?}: {error:#}"))
-            })?;
-        Ok(Self { contract, plan, output_indices })
+        let engine = match options.backend {
+            Backend::Tract => {
+                let shape = contract.input.shape.clone();
+                let plan = model
+                    .with_input_fact(0, f32::fact(&shape).into())
+                    .and_then(|model| model.into_optimized())
+                    .and_then(|model| model.into_runnable())
+                    .map_err(|error| {
+                        graph_error(format!("cannot build the network for input {shape:?}: {error:#}"))
+                    })?;
+                Engine::Tract { plan, output_indices }
+            }
+            #[cfg(feature = "onnxruntime")]
+            Backend::Onnxruntime => Engine::Onnxruntime(
+                super::onnxruntime::OnnxRuntimeSession::load(bytes)
+                    .map_err(|reason| ModelError::Backend { source_name: source_name.clone(), reason })?,
+            ),
+            #[cfg(not(feature = "onnxruntime"))]
+            Backend::Onnxruntime => {
+                return Err(ModelError::Backend {
+                    source_name,
+                    reason: "this relocd was built without ONNX Runtime (cargo build --features onnxruntime)"
+                        .into(),
+                });
+            }
+        };
+        Ok(Self { contract, engine })
     }
 
     /// The model's contract.
     pub fn contract(&self) -> &ModelContract {
         &self.contract
+    }
+
+    /// The engine that runs it.
+    pub fn backend(&self) -> Backend {
+        match self.engine {
+            Engine::Tract { .. } => Backend::Tract,
+            #[cfg(feature = "onnxruntime")]
+            Engine::Onnxruntime(_) => Backend::Onnxruntime,
+        }
     }
 
     /// Runs the network on one input tensor.
@@ -173,21 +251,14 @@ impl Model {
                 input.shape, self.contract.input.shape
             )));
         }
-        let tensor = tract_ndarray::Array4::from_shape_vec(input.shape, input.data.clone())
-            .map_err(|error| ModelError::Inference(error.to_string()))?
-            .into_tensor();
-        let outputs = self
-            .plan
-            .run(tvec!(tensor.into()))
-            .map_err(|error| ModelError::Inference(format!("{error:#}")))?;
         let names = self.contract.required_outputs();
-        let mut values = Vec::with_capacity(names.len());
-        for (name, index) in names.iter().zip(&self.output_indices) {
-            let view = outputs[*index]
-                .to_plain_array_view::<f32>()
-                .map_err(|error| ModelError::Inference(format!("output {name}: {error:#}")))?;
-            values.push(view.iter().copied().collect::<Vec<f32>>());
-        }
+        let values = match &self.engine {
+            Engine::Tract { plan, output_indices } => run_tract(plan, output_indices, input, &names)?,
+            #[cfg(feature = "onnxruntime")]
+            Engine::Onnxruntime(session) => {
+                session.run(&self.contract.input.name, input, &names).map_err(ModelError::Inference)?
+            }
+        };
         let take = |index: usize, length: usize| -> Result<Vec<f32>, ModelError> {
             let found = &values[index];
             if found.len() == length {
@@ -212,6 +283,30 @@ impl Model {
             heading_kappa: take(3 + offset, 1)?[0],
         })
     }
+}
+
+/// Runs tract's plan and returns the outputs at `output_indices`, flattened.
+fn run_tract(
+    plan: &Arc<TypedRunnableModel>,
+    output_indices: &[usize],
+    input: &InputTensor,
+    names: &[&str],
+) -> Result<Vec<Vec<f32>>, ModelError> {
+    let tensor = tract_ndarray::Array4::from_shape_vec(input.shape, input.data.clone())
+        .map_err(|error| ModelError::Inference(error.to_string()))?
+        .into_tensor();
+    let outputs =
+        plan.run(tvec!(tensor.into())).map_err(|error| ModelError::Inference(format!("{error:#}")))?;
+    names
+        .iter()
+        .zip(output_indices)
+        .map(|(name, index)| {
+            let view = outputs[*index]
+                .to_plain_array_view::<f32>()
+                .map_err(|error| ModelError::Inference(format!("output {name}: {error:#}")))?;
+            Ok(view.iter().copied().collect())
+        })
+        .collect()
 }
 
 #[cfg(test)]
