@@ -115,8 +115,9 @@ for robot in "${robots[@]}"; do
     result="$(compare "$scratch/generic.jsonl" "$scratch/atom.jsonl" 0 2>&1)" \
         || fail "$robot: the Atom model's output differs from the native generic kernels': $result"
     echo "equal to the native run with the same (generic) kernels: $result"
-    # The native run's own kernels (AVX/FMA on a desktop) sum in another order, which can move an
-    # int8 rounding by a step: the same hypotheses, numbers a little apart (seen: 2 mm in a sigma).
+    # The native run's own kernels (AVX/FMA on a desktop) sum in another order (and, with an int8
+    # activation model, can move a rounding by a step): the same hypotheses, numbers a little apart
+    # (seen with the int8 QDQ model: 2 mm in a sigma).
     result="$(compare "$scratch/native.jsonl" "$scratch/atom.jsonl" 0.05 2>&1)" \
         || fail "$robot: the Atom model's output differs from the native run's: $result"
     echo "equal to the native run with its own kernels within 0.05 (m, rad, probability): $result"

@@ -90,8 +90,9 @@ pub fn record(options: &RecordOptions, mut on_frame: impl FnMut(u64)) -> anyhow:
             deadline: end.map_or(deadline, |end| deadline.min(end)),
             stop: &background.stop,
         };
-        let captured = match source.capture(&request) {
-            Ok(captured) => captured,
+        let mut captured = Vec::with_capacity(1);
+        match source.capture(&request, &mut |frame| captured.push(frame)) {
+            Ok(_) => {}
             Err(SourceError::Timeout(waited)) => {
                 warn!("no frame from {} for {:.1} s", options.source, waited.as_secs_f64());
                 next = Instant::now();
@@ -99,7 +100,7 @@ pub fn record(options: &RecordOptions, mut on_frame: impl FnMut(u64)) -> anyhow:
             }
             Err(SourceError::Stopped) => break,
             Err(error) => return Err(error).context("recording stopped"),
-        };
+        }
         next = Instant::now().max(next + spacing);
         for frame in captured {
             let (width, height) = frame.frame.dimensions();

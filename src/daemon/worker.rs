@@ -11,9 +11,10 @@ use tracing::{info, warn};
 
 use super::config::BurstConfig;
 use super::publish::Publisher;
-use super::source::{CaptureRequest, CapturedFrame, FrameSource, sleep_unless_stopped, unix_now};
+use super::source::{CaptureRequest, FrameSource, sleep_unless_stopped, unix_now};
 use super::status::Status;
 use super::triggers::{Steadiness, TriggerEvent};
+use crate::geometry::FieldPose;
 use crate::protocol::message::{
     FrameCounts, Hypothesis, Latency, Message, ModelInfo, SCHEMA_VERSION, Trigger, TriggerKind,
 };
@@ -174,16 +175,17 @@ impl Worker {
             deadline: times.capture_started + Duration::from_millis(self.burst.timeout_ms),
             stop: &self.stop,
         };
-        let frames = self.source.capture(&request);
-        times.capture_ms = times.capture_started.elapsed().as_secs_f64() * 1e3;
-        let frames = frames.map_err(|error| format!("no frames: {error}"))?;
-        message.captured = frames.first().map(|frame| frame.taken);
-
-        let mut predictions: Vec<Prediction> = Vec::with_capacity(frames.len());
+        // Each frame is relocalised as it arrives, while the source waits for the next one.
+        let mut predictions: Vec<Prediction> = Vec::with_capacity(request.count);
         let mut errors = Vec::new();
-        for captured in &frames {
+        let mut first_taken = None;
+        let mut truth = None;
+        let relocaliser = &self.relocaliser;
+        let captured = self.source.capture(&request, &mut |captured| {
+            first_taken.get_or_insert(captured.taken);
+            truth = truth.or(captured.truth);
             let yaw = captured.camera.map_or(head_yaw, |camera| camera.head_yaw());
-            match self.relocaliser.relocalise(&captured.frame, yaw) {
+            match relocaliser.relocalise(&captured.frame, yaw) {
                 Ok(result) => {
                     times.preprocess_ms += result.timings.preprocess_ms;
                     times.inference_ms += result.timings.inference_ms;
@@ -192,9 +194,13 @@ impl Worker {
                 }
                 Err(error) => errors.push(error.to_string()),
             }
-        }
+        });
+        times.capture_ms = times.capture_started.elapsed().as_secs_f64() * 1e3;
+        let frames = captured.map_err(|error| format!("no frames: {error}"))?;
+        message.captured = first_taken;
+
         if let Some(error) = errors.first() {
-            warn!("{} of {} frames could not be relocalised: {error}", errors.len(), frames.len());
+            warn!("{} of {frames} frames could not be relocalised: {error}", errors.len());
         }
         let fusing = Instant::now();
         let mut estimate = fuse(&predictions).map_err(|error| match errors.first() {
@@ -219,15 +225,14 @@ impl Worker {
                 sigma: [h.sigma.x, h.sigma.y, h.sigma.theta],
             })
             .collect();
-        log_result(message, &frames);
+        log_result(message, truth);
         Ok(())
     }
 }
 
 /// Logs the best hypothesis, and its error where the source knows the truth (replay, sim).
-fn log_result(message: &Message, frames: &[CapturedFrame]) {
+fn log_result(message: &Message, truth: Option<FieldPose>) {
     let Some(best) = message.hypotheses.first() else { return };
-    let truth = frames.iter().find_map(|frame| frame.truth);
     let error = truth.map(|truth| {
         let closest = message
             .hypotheses

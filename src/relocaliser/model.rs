@@ -176,6 +176,9 @@ impl Model {
         }
 
         let model = onnx.model_for_proto_model(&proto).map_err(|error| graph_error(format!("{error:#}")))?;
+        // The decoded protobuf holds a copy of every weight: free it before tract optimises the graph,
+        // which is where loading peaks.
+        drop(proto);
         let inputs = model.input_outlets().map_err(|error| graph_error(format!("{error:#}")))?;
         let input_names: Vec<&str> =
             inputs.iter().map(|outlet| model.node(outlet.node).name.as_str()).collect();

@@ -86,31 +86,36 @@ impl ForwardedSource {
 }
 
 impl FrameSource for ForwardedSource {
-    fn capture(&mut self, request: &CaptureRequest<'_>) -> Result<Vec<CapturedFrame>, SourceError> {
+    fn capture(
+        &mut self,
+        request: &CaptureRequest<'_>,
+        deliver: &mut dyn FnMut(CapturedFrame),
+    ) -> Result<usize, SourceError> {
         let started = Instant::now();
         let mut after = started;
-        let mut frames = Vec::with_capacity(request.count);
-        while frames.len() < request.count && !request.stop.load(std::sync::atomic::Ordering::Relaxed) {
+        let mut delivered = 0;
+        while delivered < request.count && !request.stop.load(std::sync::atomic::Ordering::Relaxed) {
             // Wake up now and then to notice a shutdown.
             let until = request.deadline.min(Instant::now() + Duration::from_millis(100));
             match self.queue.first_after(after, until) {
                 Some(arrived) => {
                     after = arrived.at + request.spacing.max(Duration::from_nanos(1));
-                    frames.push(CapturedFrame {
+                    deliver(CapturedFrame {
                         frame: Frame::Yuyv(arrived.image),
                         taken: arrived.taken,
                         camera: arrived.camera,
                         truth: None,
                     });
+                    delivered += 1;
                 }
                 None if Instant::now() >= request.deadline => break,
                 None => {}
             }
         }
-        if frames.is_empty() {
+        if delivered == 0 {
             return Err(SourceError::Timeout(started.elapsed()));
         }
-        Ok(frames)
+        Ok(delivered)
     }
 }
 
@@ -181,6 +186,7 @@ mod tests {
     use std::sync::atomic::AtomicBool;
 
     use super::*;
+    use crate::daemon::source::capture_all;
 
     fn arrived(at: Instant, value: u8) -> Arrived {
         Arrived { image: YuyvImage::new(2, 1, vec![value; 4]).unwrap(), camera: None, at, taken: 0.0 }
@@ -217,7 +223,7 @@ mod tests {
             deadline: Instant::now() + Duration::from_secs(5),
             stop: &stop,
         };
-        let frames = ForwardedSource::new(queue).capture(&request).unwrap();
+        let frames = capture_all(&mut ForwardedSource::new(queue), &request).unwrap();
         sender.join().unwrap();
         let values: Vec<u8> = frames
             .iter()
@@ -239,7 +245,7 @@ mod tests {
             deadline: Instant::now() + Duration::from_millis(20),
             stop: &stop,
         };
-        let result = ForwardedSource::new(Arc::new(FrameQueue::new(2))).capture(&request);
+        let result = capture_all(&mut ForwardedSource::new(Arc::new(FrameQueue::new(2))), &request);
         assert!(matches!(result, Err(SourceError::Timeout(_))));
     }
 }

@@ -89,9 +89,26 @@ impl CaptureRequest<'_> {
 
 /// A camera, or something that stands in for one.
 pub trait FrameSource: Send {
-    /// Takes up to `request.count` frames, `request.spacing` apart, starting now. Returns at least
-    /// one frame or an error saying why there is none; fewer than asked when the deadline passed.
-    fn capture(&mut self, request: &CaptureRequest<'_>) -> Result<Vec<CapturedFrame>, SourceError>;
+    /// Takes up to `request.count` frames, `request.spacing` apart, starting now, and hands each to
+    /// `deliver` as soon as it is taken, so the caller relocalises it while the next one is awaited
+    /// and no burst is held in memory. Returns how many were delivered, at least one, or an error
+    /// saying why there is none; fewer than asked when the deadline passed.
+    fn capture(
+        &mut self,
+        request: &CaptureRequest<'_>,
+        deliver: &mut dyn FnMut(CapturedFrame),
+    ) -> Result<usize, SourceError>;
+}
+
+/// Captures a whole burst into memory (for tests of the sources).
+#[cfg(test)]
+pub fn capture_all(
+    source: &mut dyn FrameSource,
+    request: &CaptureRequest<'_>,
+) -> Result<Vec<CapturedFrame>, SourceError> {
+    let mut frames = Vec::new();
+    source.capture(request, &mut |frame| frames.push(frame))?;
+    Ok(frames)
 }
 
 /// Sleeps until `until` in steps of at most 50 ms, so that a shutdown is noticed; false if `stop`

@@ -72,36 +72,41 @@ impl ReplaySource {
 }
 
 impl FrameSource for ReplaySource {
-    fn capture(&mut self, request: &CaptureRequest<'_>) -> Result<Vec<CapturedFrame>, SourceError> {
+    fn capture(
+        &mut self,
+        request: &CaptureRequest<'_>,
+        deliver: &mut dyn FnMut(CapturedFrame),
+    ) -> Result<usize, SourceError> {
         let started = Instant::now();
-        let mut frames = Vec::with_capacity(request.count);
+        let mut delivered = 0;
         let mut earliest = started;
-        while frames.len() < request.count {
+        while delivered < request.count {
             let (index, shown) = match self.next_frame(earliest) {
                 Ok(next) => next,
-                Err(error) if frames.is_empty() => return Err(error),
+                Err(error) if delivered == 0 => return Err(error),
                 Err(_) => break,
             };
             if !request.sleep_until(shown) {
                 break;
             }
             let record = &self.recording.records()[index];
-            frames.push(CapturedFrame {
+            deliver(CapturedFrame {
                 frame: self.recording.load_frame(record)?,
                 taken: unix_now(),
                 camera: record.camera,
                 truth: record.pose,
             });
+            delivered += 1;
             earliest = shown + request.spacing.max(Duration::from_micros(1));
         }
-        if frames.is_empty() {
+        if delivered == 0 {
             return Err(if request.stop.load(std::sync::atomic::Ordering::Relaxed) {
                 SourceError::Stopped
             } else {
                 SourceError::Timeout(request.deadline.saturating_duration_since(started))
             });
         }
-        Ok(frames)
+        Ok(delivered)
     }
 }
 
@@ -111,6 +116,7 @@ mod tests {
     use std::sync::atomic::AtomicBool;
 
     use super::*;
+    use crate::daemon::source::capture_all;
 
     fn sample() -> Recording {
         Recording::open(&Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/sample")).unwrap()
@@ -126,7 +132,7 @@ mod tests {
             deadline: Instant::now() + Duration::from_secs(5),
             stop: &stop,
         };
-        let frames = source.capture(&request).unwrap();
+        let frames = capture_all(&mut source, &request).unwrap();
         assert_eq!(frames.len(), 3);
         let truths: Vec<_> = frames.iter().map(|frame| frame.truth.unwrap()).collect();
         let records = source.recording.records();
@@ -146,7 +152,7 @@ mod tests {
         source.started -= Duration::from_secs(10);
         let request =
             CaptureRequest { count: 1, spacing: Duration::ZERO, deadline: Instant::now(), stop: &stop };
-        assert!(matches!(source.capture(&request), Err(SourceError::Ended)));
+        assert!(matches!(capture_all(&mut source, &request), Err(SourceError::Ended)));
     }
 
     #[test]
@@ -160,7 +166,7 @@ mod tests {
             deadline: Instant::now() + Duration::from_secs(1),
             stop: &stop,
         };
-        let frame = source.capture(&request).unwrap().remove(0);
+        let frame = capture_all(&mut source, &request).unwrap().remove(0);
         assert_eq!(frame.truth, source.recording.records()[1].pose, "the second frame of the fourth pass");
     }
 }

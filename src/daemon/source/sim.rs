@@ -48,28 +48,33 @@ pub fn walk(seconds: f64) -> FieldPose {
 }
 
 impl FrameSource for SimSource {
-    fn capture(&mut self, request: &CaptureRequest<'_>) -> Result<Vec<CapturedFrame>, SourceError> {
-        let mut frames = Vec::with_capacity(request.count);
+    fn capture(
+        &mut self,
+        request: &CaptureRequest<'_>,
+        deliver: &mut dyn FnMut(CapturedFrame),
+    ) -> Result<usize, SourceError> {
+        let mut delivered = 0;
         let mut next = Instant::now();
-        while frames.len() < request.count && request.sleep_until(next) {
+        while delivered < request.count && request.sleep_until(next) {
             let sample = self.randomisation.sample(&self.field, self.seed, self.frames_taken, 1);
             self.frames_taken += 1;
             let pose = walk(self.started.elapsed().as_secs_f64());
             let taken = unix_now();
             let camera = Camera::new(self.intrinsics, &pose, &sample.camera);
             let image = render(&sample.scene, &camera, &sample.settings);
-            frames.push(CapturedFrame {
+            next = Instant::now().max(next + request.spacing);
+            deliver(CapturedFrame {
                 frame: Frame::Rgb(image),
                 taken,
                 camera: Some(sample.camera),
                 truth: Some(pose),
             });
-            next = Instant::now().max(next + request.spacing);
+            delivered += 1;
         }
-        if frames.is_empty() {
+        if delivered == 0 {
             return Err(SourceError::Stopped);
         }
-        Ok(frames)
+        Ok(delivered)
     }
 }
 
@@ -79,6 +84,7 @@ mod tests {
     use std::time::Duration;
 
     use super::*;
+    use crate::daemon::source::capture_all;
 
     #[test]
     fn the_walk_stays_on_the_carpet_and_faces_where_it_goes() {
@@ -102,7 +108,7 @@ mod tests {
             deadline: Instant::now() + Duration::from_secs(10),
             stop: &stop,
         };
-        let frames = source.capture(&request).unwrap();
+        let frames = capture_all(&mut source, &request).unwrap();
         assert_eq!(frames.len(), 2);
         assert_eq!(frames[0].frame.dimensions(), (40, 30));
         assert!(frames[0].truth.unwrap().distance_to(&walk(0.0)) < 0.1);

@@ -116,7 +116,11 @@ impl V4lSource {
 }
 
 impl FrameSource for V4lSource {
-    fn capture(&mut self, request: &CaptureRequest<'_>) -> Result<Vec<CapturedFrame>, SourceError> {
+    fn capture(
+        &mut self,
+        request: &CaptureRequest<'_>,
+        deliver: &mut dyn FnMut(CapturedFrame),
+    ) -> Result<usize, SourceError> {
         let started = Instant::now();
         let mut streaming = match self.streaming.take() {
             Some(mut streaming) => {
@@ -128,10 +132,10 @@ impl FrameSource for V4lSource {
             }
             None => self.open_with_retries(request)?,
         };
-        let mut frames = Vec::with_capacity(request.count);
+        let mut delivered = 0;
         let mut failure = None;
         let mut next = Instant::now();
-        while frames.len() < request.count && Instant::now() < request.deadline && !request.stopped() {
+        while delivered < request.count && Instant::now() < request.deadline && !request.stopped() {
             let (buffer, metadata) = match streaming.stream.next() {
                 Ok(frame) => frame,
                 Err(error) => {
@@ -144,13 +148,14 @@ impl FrameSource for V4lSource {
             }
             match frame_from_buffer(buffer, metadata.bytesused as usize, &streaming.format) {
                 Ok(image) => {
-                    frames.push(CapturedFrame {
+                    next = Instant::now() + request.spacing;
+                    deliver(CapturedFrame {
                         frame: Frame::Yuyv(image),
                         taken: unix_now(),
                         camera: None,
                         truth: None,
                     });
-                    next = Instant::now() + request.spacing;
+                    delivered += 1;
                 }
                 Err(reason) => warn!("camera {}: frame dropped: {reason}", streaming.path.display()),
             }
@@ -158,8 +163,8 @@ impl FrameSource for V4lSource {
         if failure.is_none() && self.keep_streaming {
             self.streaming = Some(streaming);
         }
-        match (frames.is_empty(), failure) {
-            (false, _) => Ok(frames),
+        match (delivered == 0, failure) {
+            (false, _) => Ok(delivered),
             (true, Some(reason)) => {
                 Err(SourceError::Camera { device: self.devices[0].display().to_string(), reason })
             }
