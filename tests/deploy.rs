@@ -143,6 +143,37 @@ fn the_unit_runs_the_installed_files_as_nao_at_low_priority() {
     }
 }
 
+/// Where systemd's tools are installed: the unit is valid, and its hardening keeps systemd's exposure
+/// score "OK" (≤ 3.0; without the hardening it is 9.0, "UNSAFE").
+#[test]
+fn the_unit_verifies_and_is_hardened() {
+    let analyze = Path::new("/usr/bin/systemd-analyze");
+    if !analyze.exists() {
+        eprintln!("systemd-analyze not installed: unit not verified");
+        return;
+    }
+    // `verify` checks that ExecStart's binary exists: point it at the one cargo built.
+    let unit = std::fs::read_to_string(repository().join("deploy/relocd.service"))
+        .unwrap()
+        .replace("/home/nao/relocd/relocd run", &format!("{} run", env!("CARGO_BIN_EXE_relocd")));
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("relocd.service");
+    std::fs::write(&path, unit).unwrap();
+    let verify = Command::new(analyze).arg("verify").arg(&path).output().unwrap();
+    assert!(verify.status.success(), "{}", String::from_utf8_lossy(&verify.stderr));
+    assert!(verify.stderr.is_empty(), "{}", String::from_utf8_lossy(&verify.stderr));
+
+    let security = Command::new(analyze).args(["security", "--offline=yes"]).arg(&path).output().unwrap();
+    let report = String::from_utf8_lossy(&security.stdout);
+    let exposure: f64 = report
+        .lines()
+        .find_map(|line| line.split("Overall exposure level for relocd.service: ").nth(1))
+        .and_then(|rest| rest.split_whitespace().next())
+        .and_then(|score| score.parse().ok())
+        .unwrap_or_else(|| panic!("no exposure level in {report}"));
+    assert!(exposure <= 3.0, "exposure {exposure}:\n{report}");
+}
+
 #[test]
 fn cross_builds_the_nao_targets_statically_for_their_atoms() {
     let text = std::fs::read_to_string(repository().join("cross.toml")).unwrap();

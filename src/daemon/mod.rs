@@ -10,7 +10,7 @@ pub mod status;
 pub mod triggers;
 pub mod worker;
 
-use std::net::SocketAddr;
+use std::net::{IpAddr, SocketAddr};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -183,6 +183,28 @@ fn v4l_source(_: &Config, device: &std::path::Path) -> anyhow::Result<Box<dyn Fr
     )
 }
 
+/// How far a listener reaches, for the start-up log: anything beyond loopback is a config choice
+/// (the GameController's default is every interface, since its packets are broadcast on the team's
+/// network), and the log says so.
+fn reach(ip: IpAddr) -> &'static str {
+    if ip.is_loopback() {
+        "loopback only"
+    } else if ip.is_unspecified() {
+        "every interface: reachable from the network"
+    } else {
+        "reachable from the network"
+    }
+}
+
+/// A listener and its reach.
+fn described(listen: &Listen) -> String {
+    match listen {
+        Listen::Udp(address) => format!("{listen} ({})", reach(address.ip())),
+        Listen::Unix(_) => format!("{listen} (this machine, owner and group only)"),
+        Listen::Off => listen.to_string(),
+    }
+}
+
 /// Binds the trigger inputs and starts their tasks.
 fn start_inputs(
     config: &Config,
@@ -196,7 +218,7 @@ fn start_inputs(
             let address = SocketAddr::new(gamecontroller.address, gamecontroller.port);
             let socket = sockets::bind_udp(address, true)
                 .with_context(|| format!("cannot listen for the GameController on {address}"))?;
-            info!("GameController: team {team}, player {player}, on {address}");
+            info!("GameController: team {team}, player {player}, on {address} ({})", reach(address.ip()));
             let watch = PenaltyWatch::new(team, player);
             tokio::spawn(triggers::gamecontroller(
                 Datagram::Udp(socket),
@@ -216,7 +238,7 @@ fn start_inputs(
         SensorInput::Forwarded(listen) => {
             let socket =
                 Datagram::bind(listen).with_context(|| format!("cannot listen for sensors on {listen}"))?;
-            info!("sensors: {listen}");
+            info!("sensors: {}", described(listen));
             tokio::spawn(triggers::sensor_datagrams(
                 socket,
                 detector,
@@ -239,7 +261,7 @@ fn start_inputs(
     if config.control != Listen::Off {
         let socket = Datagram::bind(&config.control)
             .with_context(|| format!("cannot open the control socket {}", config.control))?;
-        info!("control: {}", config.control);
+        info!("control: {}", described(&config.control));
         tokio::spawn(triggers::control(socket, triggers.clone(), status.clone()));
     }
     Ok(())

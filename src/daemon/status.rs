@@ -24,7 +24,8 @@ pub struct TriggerCounts {
 /// Inputs refused by their decoder, by input.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct Rejected {
-    /// GameController packets.
+    /// GameController packets: malformed, or about our team but from a second GameController, a
+    /// duplicate or an old packet replayed.
     pub gamecontroller: u64,
     /// Sensor messages.
     pub sensors: u64,

@@ -3,6 +3,7 @@
 //! status). They decode, decide, and hand a [`TriggerEvent`] to the relocalisation thread; bad input
 //! is counted and logged, never fatal.
 
+use std::net::{IpAddr, Ipv4Addr};
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
@@ -18,7 +19,7 @@ use super::source::unix_now;
 use super::status::{GameInfo, Status};
 use crate::posture::{PostureDetector, PostureEvent};
 use crate::protocol::control::ControlRequest;
-use crate::protocol::gamecontroller::{GameControlData, PenaltyWatch};
+use crate::protocol::gamecontroller::{GameControlData, PacketOrder, PenaltyWatch};
 use crate::protocol::lola::LolaState;
 use crate::protocol::message::TriggerKind;
 
@@ -142,8 +143,10 @@ pub async fn gamecontroller(
 ) {
     let mut buffer = vec![0u8; MAX_DATAGRAM];
     let mut rejects = RejectLog::default();
+    let mut order = PacketOrder::default();
+    let started = Instant::now();
     loop {
-        let (length, _) = receive(&socket, &mut buffer, "GameController").await;
+        let (length, peer) = receive(&socket, &mut buffer, "GameController").await;
         let packet = match GameControlData::parse(&buffer[..length]) {
             Ok(packet) => packet,
             Err(error) => {
@@ -153,6 +156,15 @@ pub async fn gamecontroller(
             }
         };
         let Some(ours) = packet.team_info(team) else { continue };
+        let source = match peer {
+            Peer::Udp(address) => address.ip(),
+            Peer::Unix(_) | Peer::Unnamed => IpAddr::V4(Ipv4Addr::LOCALHOST),
+        };
+        if let Err(ignored) = order.accept(source, packet.packet_number, started.elapsed().as_secs_f64()) {
+            status.update(|report| report.rejected.gamecontroller += 1);
+            rejects.log("GameController packet", &ignored);
+            continue;
+        }
         let returned = watch.update(&packet);
         if let Some(penalty) = watch.penalty() {
             status.set_game(GameInfo { state: packet.state, set_play: packet.set_play, penalty, age_s: 0.0 });

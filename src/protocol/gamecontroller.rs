@@ -5,6 +5,8 @@
 //! Every field is checked; a packet with a wrong size, header, version or an out-of-range value is
 //! rejected with the reason, so a daemon can log it and go on.
 
+use std::net::IpAddr;
+
 use thiserror::Error;
 
 /// UDP port the GameController broadcasts control packets to.
@@ -410,10 +412,83 @@ impl PenaltyWatch {
     }
 }
 
+/// How long the followed GameController may be silent before another source, or a packet number
+/// that went backwards (a restarted GameController counts from 0), is accepted. It sends at 2 Hz.
+pub const SILENCE_BEFORE_SWITCHING_S: f64 = 2.0;
+
+/// Why a well-formed packet was not used.
+#[derive(Clone, Copy, Debug, Error, PartialEq, Eq)]
+pub enum Ignored {
+    /// Another GameController is being followed and is still sending.
+    #[error("from {0}, while another GameController is being followed")]
+    OtherSource(IpAddr),
+    /// A duplicate, or an old packet replayed: its number is not ahead of the last one used.
+    #[error("packet number {got} is not newer than {last}")]
+    NotNewer {
+        /// The last packet number used.
+        last: u8,
+        /// This packet's number.
+        got: u8,
+    },
+}
+
+/// Lets through packets from one GameController at a time, in order, so that a second
+/// GameController on the network, duplicates and replayed old packets cannot fake a penalty or its end.
+/// Packet numbers wrap at 256: a number up to 127 ahead of the last one is newer.
+#[derive(Clone, Debug, Default)]
+pub struct PacketOrder {
+    /// The followed source, its last packet number, and when it was heard (seconds, caller's clock).
+    followed: Option<(IpAddr, u8, f64)>,
+}
+
+impl PacketOrder {
+    /// Whether to use a packet numbered `packet_number` from `source`, received at `now_s`.
+    pub fn accept(&mut self, source: IpAddr, packet_number: u8, now_s: f64) -> Result<(), Ignored> {
+        if let Some((followed, last, heard)) = self.followed {
+            let silent = now_s - heard > SILENCE_BEFORE_SWITCHING_S;
+            if !silent {
+                if source != followed {
+                    return Err(Ignored::OtherSource(source));
+                }
+                if !(1..128).contains(&packet_number.wrapping_sub(last)) {
+                    return Err(Ignored::NotNewer { last, got: packet_number });
+                }
+            }
+        }
+        self.followed = Some((source, packet_number, now_s));
+        Ok(())
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use proptest::prelude::*;
+
+    const GC: IpAddr = IpAddr::V4(std::net::Ipv4Addr::new(10, 0, 0, 1));
+    const OTHER: IpAddr = IpAddr::V4(std::net::Ipv4Addr::new(10, 0, 0, 2));
+
+    #[test]
+    fn packets_are_used_in_order_from_one_gamecontroller() {
+        let mut order = PacketOrder::default();
+        assert_eq!(order.accept(GC, 10, 0.0), Ok(()));
+        assert_eq!(order.accept(GC, 11, 0.5), Ok(()));
+        assert_eq!(order.accept(GC, 11, 0.6), Err(Ignored::NotNewer { last: 11, got: 11 }));
+        assert_eq!(order.accept(GC, 5, 0.7), Err(Ignored::NotNewer { last: 11, got: 5 }));
+        assert_eq!(order.accept(OTHER, 12, 0.8), Err(Ignored::OtherSource(OTHER)));
+        assert_eq!(order.accept(GC, 13, 1.0), Ok(()), "a lost packet is no reason to stop");
+    }
+
+    #[test]
+    fn numbers_wrap_and_a_silent_gamecontroller_can_be_replaced() {
+        let mut order = PacketOrder::default();
+        order.accept(GC, 254, 0.0).unwrap();
+        assert_eq!(order.accept(GC, 1, 0.5), Ok(()), "255 → 0 → 1");
+        // A restarted GameController counts from 0 again; another one takes over after silence.
+        assert_eq!(order.accept(GC, 0, 3.0), Ok(()));
+        assert_eq!(order.accept(OTHER, 0, 5.5), Ok(()));
+        assert_eq!(order.accept(GC, 1, 5.6), Err(Ignored::OtherSource(GC)));
+    }
 
     fn team(number: u8) -> TeamInfo {
         TeamInfo {

@@ -102,7 +102,12 @@ impl Daemon {
     }
 
     pub fn send_gamecontroller(&self, bytes: &[u8]) {
-        let socket = UdpSocket::bind("127.0.0.1:0").unwrap();
+        self.send_gamecontroller_from("127.0.0.1", bytes);
+    }
+
+    /// Sends a GameController packet from another loopback address (a second GameController).
+    pub fn send_gamecontroller_from(&self, source: &str, bytes: &[u8]) {
+        let socket = UdpSocket::bind((source, 0)).unwrap();
         socket.send_to(bytes, ("127.0.0.1", self.gamecontroller_port)).unwrap();
     }
 
