@@ -80,6 +80,8 @@ pub struct Config {
     pub sim: SimConfig,
     /// Scheduling.
     pub process: ProcessConfig,
+    /// Longer GameController, sensor and control datagrams are dropped unread (and counted).
+    pub max_datagram_bytes: usize,
 }
 
 impl Default for Config {
@@ -102,6 +104,7 @@ impl Default for Config {
             replay: ReplayConfig::default(),
             sim: SimConfig::default(),
             process: ProcessConfig::default(),
+            max_datagram_bytes: 16_384,
         }
     }
 }
@@ -145,6 +148,9 @@ impl Config {
         }
         if self.publish.targets.len() > 8 {
             return invalid("publish.targets", "at most 8 targets");
+        }
+        if !(256..=65_507).contains(&self.max_datagram_bytes) {
+            return invalid("max_datagram_bytes", "must lie in 256..=65507 (the largest UDP payload)");
         }
         if !(1..=1000).contains(&self.frames.queue) {
             return invalid("frames.queue", "must lie in 1..=1000");

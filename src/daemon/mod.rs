@@ -25,7 +25,7 @@ use self::source::FrameSource;
 use self::source::forwarded::{ForwardedSource, FrameQueue};
 use self::status::Status;
 use self::triggers::{Steadiness, Triggers};
-use self::worker::Worker;
+use self::worker::{ModelSlot, Worker};
 use crate::geometry::FieldModel;
 use crate::posture::{PostureConfig, PostureDetector};
 use crate::protocol::gamecontroller::PenaltyWatch;
@@ -65,14 +65,16 @@ pub fn run(config: Config) -> anyhow::Result<()> {
     // Sockets are bound inside the runtime and owned by their tasks, which remove Unix socket files
     // when the runtime drops them at shutdown.
     // Signal handlers come first, so that a SIGTERM during start-up is a clean stop too.
-    let (source, mut terminate, mut interrupt) = runtime.block_on(async {
+    let (source, mut terminate, mut interrupt, mut hangup) = runtime.block_on(async {
         let terminate = signal(SignalKind::terminate())?;
         let interrupt = signal(SignalKind::interrupt())?;
+        let hangup = signal(SignalKind::hangup())?;
         let source = open_source(&config, &model, &status)?;
         start_inputs(&config, &triggers, &steadiness, &status)?;
-        anyhow::Ok((source, terminate, interrupt))
+        anyhow::Ok((source, terminate, interrupt, hangup))
     })?;
     drop(triggers);
+    let replacement = Arc::new(ModelSlot::default());
 
     let worker = Worker {
         relocaliser: Relocaliser::new(model),
@@ -81,11 +83,12 @@ pub fn run(config: Config) -> anyhow::Result<()> {
         burst: config.burst.clone(),
         default_head_yaw: config.camera.head_yaw_deg.to_radians(),
         steadiness,
-        status,
+        status: status.clone(),
         stop: stop.clone(),
+        replacement: replacement.clone(),
     };
     // The sender drops when the thread ends, however it ends: a thread that died is noticed at once.
-    let (alive, exited) = tokio::sync::oneshot::channel::<()>();
+    let (alive, mut exited) = tokio::sync::oneshot::channel::<()>();
     let worker = std::thread::Builder::new()
         .name("relocalise".into())
         .spawn(move || {
@@ -96,10 +99,13 @@ pub fn run(config: Config) -> anyhow::Result<()> {
     info!("relocd running: source {}, publishing to {}", config.source, targets(&config));
 
     let worker_died = runtime.block_on(async {
-        tokio::select! {
-            _ = terminate.recv() => { info!("SIGTERM: shutting down"); false }
-            _ = interrupt.recv() => { info!("SIGINT: shutting down"); false }
-            _ = exited => true,
+        loop {
+            tokio::select! {
+                _ = terminate.recv() => { info!("SIGTERM: shutting down"); break false }
+                _ = interrupt.recv() => { info!("SIGINT: shutting down"); break false }
+                _ = hangup.recv() => reload_model(&config, &replacement, &status),
+                _ = &mut exited => break true,
+            }
         }
     });
     stop.store(true, Ordering::Relaxed);
@@ -112,6 +118,32 @@ pub fn run(config: Config) -> anyhow::Result<()> {
     }
     info!("stopped");
     Ok(())
+}
+
+/// SIGHUP: loads the configured model file again and offers it to the relocalisation thread. A file
+/// that cannot be used leaves the running model in place, and the log and `status` say why. Inputs
+/// wait while the file loads (their datagrams queue in the kernel).
+fn reload_model(config: &Config, replacement: &ModelSlot, status: &Status) {
+    let Some(path) = &config.model else {
+        warn!("SIGHUP: no model file to reload (the built-in model is in use)");
+        return;
+    };
+    let options = LoadOptions { backend: config.backend, representation: config.representation };
+    match relocaliser::load_model(Some(path), options) {
+        Ok((model, _)) => {
+            let id = model.contract().model_id.clone();
+            info!("SIGHUP: loaded {} ({id}); the next burst uses it", path.display());
+            status.update(|report| {
+                report.model = id;
+                report.model_error = None;
+            });
+            replacement.offer(model);
+        }
+        Err(error) => {
+            warn!("SIGHUP: keeping the running model: {error}");
+            status.update(|report| report.model_error = Some(error.to_string()));
+        }
+    }
 }
 
 fn targets(config: &Config) -> String {
@@ -222,6 +254,7 @@ fn start_inputs(
             let watch = PenaltyWatch::new(team, player);
             tokio::spawn(triggers::gamecontroller(
                 Datagram::Udp(socket),
+                config.max_datagram_bytes,
                 watch,
                 team,
                 triggers.clone(),
@@ -241,6 +274,7 @@ fn start_inputs(
             info!("sensors: {}", described(listen));
             tokio::spawn(triggers::sensor_datagrams(
                 socket,
+                config.max_datagram_bytes,
                 detector,
                 steadiness.clone(),
                 triggers.clone(),
@@ -262,7 +296,7 @@ fn start_inputs(
         let socket = Datagram::bind(&config.control)
             .with_context(|| format!("cannot open the control socket {}", config.control))?;
         info!("control: {}", described(&config.control));
-        tokio::spawn(triggers::control(socket, triggers.clone(), status.clone()));
+        tokio::spawn(triggers::control(socket, config.max_datagram_bytes, triggers.clone(), status.clone()));
     }
     Ok(())
 }

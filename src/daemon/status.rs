@@ -57,6 +57,9 @@ pub struct StatusReport {
     pub source: String,
     /// The model id.
     pub model: String,
+    /// Why the last SIGHUP reload of the model file failed (the running model was kept); cleared by a
+    /// reload that succeeds.
+    pub model_error: Option<String>,
     /// Triggers received.
     pub triggers: TriggerCounts,
     /// Triggers dropped because too many were waiting.

@@ -120,11 +120,28 @@ impl RejectLog {
     }
 }
 
-/// The next datagram; a socket error is logged and the read retried after a pause.
-async fn receive(socket: &Datagram, buffer: &mut [u8], input: &str) -> (usize, Peer) {
+/// A buffer for datagrams of at most `limit` bytes; one more byte tells a longer datagram apart.
+fn datagram_buffer(limit: usize) -> Vec<u8> {
+    vec![0u8; limit.min(MAX_DATAGRAM) + 1]
+}
+
+/// Why a datagram was dropped unread.
+#[derive(Debug)]
+struct Oversized(usize);
+
+impl std::fmt::Display for Oversized {
+    fn fmt(&self, formatter: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(formatter, "datagram longer than max_datagram_bytes = {}", self.0)
+    }
+}
+
+/// The next datagram, `Err` when it is longer than the buffer allows (then it is not parsed); a
+/// socket error is logged and the read retried after a pause.
+async fn receive(socket: &Datagram, buffer: &mut [u8], input: &str) -> (Result<usize, Oversized>, Peer) {
     loop {
         match socket.recv_from(buffer).await {
-            Ok(received) => return received,
+            Ok((length, peer)) if length == buffer.len() => return (Err(Oversized(length - 1)), peer),
+            Ok((length, peer)) => return (Ok(length), peer),
             Err(error) => {
                 warn!("{input} socket: {error}");
                 tokio::time::sleep(Duration::from_millis(100)).await;
@@ -136,17 +153,26 @@ async fn receive(socket: &Datagram, buffer: &mut [u8], input: &str) -> (usize, P
 /// GameController packets: our player's return from a penalty that moved it.
 pub async fn gamecontroller(
     socket: Datagram,
+    limit: usize,
     mut watch: PenaltyWatch,
     team: u8,
     triggers: Triggers,
     status: Arc<Status>,
 ) {
-    let mut buffer = vec![0u8; MAX_DATAGRAM];
+    let mut buffer = datagram_buffer(limit);
     let mut rejects = RejectLog::default();
     let mut order = PacketOrder::default();
     let started = Instant::now();
     loop {
-        let (length, peer) = receive(&socket, &mut buffer, "GameController").await;
+        let (received, peer) = receive(&socket, &mut buffer, "GameController").await;
+        let length = match received {
+            Ok(length) => length,
+            Err(oversized) => {
+                status.update(|report| report.rejected.gamecontroller += 1);
+                rejects.log("GameController packet", &oversized);
+                continue;
+            }
+        };
         let packet = match GameControlData::parse(&buffer[..length]) {
             Ok(packet) => packet,
             Err(error) => {
@@ -200,17 +226,22 @@ fn take_sample(
 /// LoLA state messages forwarded as datagrams, one per datagram.
 pub async fn sensor_datagrams(
     socket: Datagram,
+    limit: usize,
     mut detector: PostureDetector,
     steadiness: Arc<Steadiness>,
     triggers: Triggers,
     status: Arc<Status>,
 ) {
     let started = Instant::now();
-    let mut buffer = vec![0u8; MAX_DATAGRAM];
+    let mut buffer = datagram_buffer(limit);
     let mut rejects = RejectLog::default();
     loop {
-        let (length, _) = receive(&socket, &mut buffer, "sensor").await;
-        match LolaState::from_msgpack(&buffer[..length]) {
+        let (received, _) = receive(&socket, &mut buffer, "sensor").await;
+        let parsed = match received {
+            Ok(length) => LolaState::from_msgpack(&buffer[..length]).map_err(|error| error.to_string()),
+            Err(oversized) => Err(oversized.to_string()),
+        };
+        match parsed {
             Ok(state) => take_sample(&state, started, &mut detector, &steadiness, &triggers),
             Err(error) => {
                 status.update(|report| report.rejected.sensors += 1);
@@ -285,12 +316,16 @@ fn next_msgpack_value(bytes: &[u8]) -> Option<usize> {
 
 /// The control socket: `{"relocalise": …}` answers `{"accepted": {"trigger": ID}}`, `{"status": {}}`
 /// answers the counters, anything else `{"error": …}`.
-pub async fn control(socket: Datagram, triggers: Triggers, status: Arc<Status>) {
-    let mut buffer = vec![0u8; MAX_DATAGRAM];
+pub async fn control(socket: Datagram, limit: usize, triggers: Triggers, status: Arc<Status>) {
+    let mut buffer = datagram_buffer(limit);
     let mut rejects = RejectLog::default();
     loop {
-        let (length, peer) = receive(&socket, &mut buffer, "control").await;
-        let answer = match ControlRequest::parse(&buffer[..length]) {
+        let (received, peer) = receive(&socket, &mut buffer, "control").await;
+        let request = match received {
+            Ok(length) => ControlRequest::parse(&buffer[..length]).map_err(|error| error.to_string()),
+            Err(oversized) => Err(oversized.to_string()),
+        };
+        let answer = match request {
             Ok(ControlRequest::Relocalise(request)) => {
                 match triggers.fire(TriggerKind::Request, request.reason, request.head_yaw) {
                     Some(id) => serde_json::json!({ "accepted": { "trigger": id } }),
@@ -301,7 +336,7 @@ pub async fn control(socket: Datagram, triggers: Triggers, status: Arc<Status>) 
             Err(error) => {
                 status.update(|report| report.rejected.control += 1);
                 rejects.log("control request", &error);
-                serde_json::json!({ "error": error.to_string() })
+                serde_json::json!({ "error": error })
             }
         };
         if let Err(error) = socket.try_send_to(answer.to_string().as_bytes(), &peer) {

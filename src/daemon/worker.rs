@@ -2,8 +2,8 @@
 //! steady robot, captures a burst, relocalises every frame, fuses, applies the game prior, and
 //! publishes one message that answers every trigger it took. The only place inference runs.
 
-use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use tokio::sync::mpsc;
@@ -18,7 +18,7 @@ use crate::geometry::FieldPose;
 use crate::protocol::message::{
     FrameCounts, Hypothesis, Latency, Message, ModelInfo, SCHEMA_VERSION, Trigger, TriggerKind,
 };
-use crate::relocaliser::{PlacementPrior, Prediction, Relocaliser, fuse};
+use crate::relocaliser::{Model, PlacementPrior, Prediction, Relocaliser, fuse};
 
 /// How often the settle wait looks at the sensors.
 const SETTLE_POLL: Duration = Duration::from_millis(20);
@@ -41,6 +41,23 @@ pub struct Worker {
     pub status: Arc<Status>,
     /// Set on shutdown.
     pub stop: Arc<AtomicBool>,
+    /// A model loaded on SIGHUP, taken before the next burst.
+    pub replacement: Arc<ModelSlot>,
+}
+
+/// Hands a newly loaded model to the relocalisation thread, which switches to it between bursts.
+#[derive(Debug, Default)]
+pub struct ModelSlot(Mutex<Option<Model>>);
+
+impl ModelSlot {
+    /// Offers `model` for the next burst (replacing one offered before and not yet taken).
+    pub fn offer(&self, model: Model) {
+        *self.0.lock().unwrap_or_else(|poisoned| poisoned.into_inner()) = Some(model);
+    }
+
+    fn take(&self) -> Option<Model> {
+        self.0.lock().unwrap_or_else(|poisoned| poisoned.into_inner()).take()
+    }
 }
 
 /// Where the time of one burst went.
@@ -74,6 +91,10 @@ impl Worker {
             }
             if batch.len() > 1 {
                 self.status.update(|report| report.coalesced += batch.len() as u64 - 1);
+            }
+            if let Some(model) = self.replacement.take() {
+                info!("relocalising with model {} from now on", model.contract().model_id);
+                self.relocaliser = Relocaliser::new(model);
             }
             last_burst = Some(Instant::now());
             seq += 1;

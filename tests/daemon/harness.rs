@@ -131,6 +131,25 @@ impl Daemon {
         Message::decode(&buffer[..length]).expect("a valid message")
     }
 
+    /// Sends SIGHUP (reload the model file).
+    pub fn hang_up(&self) {
+        // SAFETY: kill only sends a signal to our own child.
+        unsafe { libc::kill(self.child.id() as i32, libc::SIGHUP) };
+    }
+
+    /// Polls `status` until `done` holds for it (at most 10 s) and returns it.
+    pub fn status_when(&self, done: impl Fn(&serde_json::Value) -> bool) -> serde_json::Value {
+        let started = Instant::now();
+        loop {
+            let status = self.status();
+            if done(&status) {
+                return status;
+            }
+            assert!(started.elapsed() < Duration::from_secs(10), "status never got there: {status}");
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+
     pub fn stop(mut self) {
         // SAFETY: kill only sends a signal to our own child.
         unsafe { libc::kill(self.child.id() as i32, libc::SIGTERM) };
