@@ -458,7 +458,8 @@ class Control {
   bool ok() const { return ok_; }
   const std::string& error() const { return error_; }
 
-  // Asks for a relocalisation; the trigger id the published message will list.
+  // Asks for a relocalisation; the trigger id the published message will list (the request's own, or
+  // the waiting one it joined when relocd had too many waiting: "coalesced_into").
   std::optional<std::uint64_t> relocalise(const std::string& reason = "") {
     std::string request = "{\"relocalise\": {";
     if (!reason.empty()) {
@@ -473,7 +474,8 @@ class Control {
     auto answer = ask(request);
     if (!answer) return std::nullopt;
     const json::Value* accepted = answer->get("accepted");
-    auto trigger = whole_number(accepted ? accepted->get("trigger") : nullptr);
+    auto trigger = whole_number(accepted ? accepted->get("coalesced_into") : nullptr);
+    if (!trigger) trigger = whole_number(accepted ? accepted->get("trigger") : nullptr);
     if (!trigger) error_ = "unexpected answer from relocd";
     return trigger;
   }

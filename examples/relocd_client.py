@@ -211,7 +211,8 @@ class Control:
         return answer[key]
 
     def relocalise(self, reason: Optional[str] = None, head_yaw: Optional[float] = None) -> int:
-        """Asks for a relocalisation; returns the trigger id the published message will list."""
+        """Asks for a relocalisation; returns the trigger id the published message will list (the
+        request's own, or the waiting one it joined when relocd had too many waiting)."""
         request = {}
         if reason is not None:
             request["reason"] = reason
@@ -220,7 +221,8 @@ class Control:
         accepted = self._ask({"relocalise": request}, "accepted")
         if not isinstance(accepted, dict) or not isinstance(accepted.get("trigger"), int):
             raise RelocdError(f"unexpected answer from relocd: {accepted!r}")
-        return accepted["trigger"]
+        joined = accepted.get("coalesced_into")
+        return joined if isinstance(joined, int) else accepted["trigger"]
 
     def status(self) -> dict:
         """relocd's counters, game state and last latencies."""

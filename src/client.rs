@@ -235,16 +235,16 @@ impl Control {
         Ok(Self { socket, daemon: daemon.clone() })
     }
 
-    /// Asks relocd to relocalise now; returns the trigger id that the published message will list.
-    /// `head_yaw` (radians, positive left) is the head yaw the frames will be taken with, if known.
+    /// Asks relocd to relocalise now; returns the trigger id that the published message will list:
+    /// the request's own, or, when relocd had too many requests waiting, the waiting one it joined
+    /// (`coalesced_into`). `head_yaw` (radians, positive left) is the head yaw the frames will be taken
+    /// with, if known.
     pub fn relocalise(&self, reason: Option<&str>, head_yaw: Option<f64>) -> Result<u64, ClientError> {
         let request =
             ControlRequest::Relocalise(RelocaliseRequest { reason: reason.map(str::to_owned), head_yaw });
         let accepted = self.ask(&request, "accepted")?;
-        accepted
-            .get("trigger")
-            .and_then(serde_json::Value::as_u64)
-            .ok_or_else(|| ClientError::Unexpected(accepted.to_string()))
+        let id = |key: &str| accepted.get(key).and_then(serde_json::Value::as_u64);
+        id("coalesced_into").or(id("trigger")).ok_or_else(|| ClientError::Unexpected(accepted.to_string()))
     }
 
     /// relocd's counters, game state and last latencies (see docs/protocol.md).

@@ -611,6 +611,7 @@ mod tests {
         assert!(message("source = ").contains("relocd.toml"));
         assert!(message("[camera]\nheight = 0").contains("camera.height"));
         assert!(message("backend = \"cuda\"").contains("tract"), "{}", message("backend = \"cuda\""));
+        assert!(message("max_datagram_bytes = 10").contains("max_datagram_bytes"));
         assert!(message("control = \"unix:/tmp/x\"\nsensors = \"unix:/tmp/x\"").contains("different"));
     }
 

@@ -4,6 +4,7 @@
 
 pub mod config;
 pub mod publish;
+pub mod queue;
 pub mod sockets;
 pub mod source;
 pub mod status;
@@ -20,6 +21,7 @@ use tracing::{info, warn};
 
 use self::config::{Config, Listen, SensorInput, SourceSpec};
 use self::publish::Publisher;
+use self::queue::TriggerQueue;
 use self::sockets::Datagram;
 use self::source::FrameSource;
 use self::source::forwarded::{ForwardedSource, FrameQueue};
@@ -32,7 +34,7 @@ use crate::protocol::gamecontroller::PenaltyWatch;
 use crate::recording::Recording;
 use crate::relocaliser::{self, Backend, LoadOptions, Model, Relocaliser};
 
-/// Triggers waiting for the relocalisation thread before new ones are refused.
+/// Triggers waiting for the relocalisation thread on their own; more join a waiting one of their kind.
 const TRIGGER_QUEUE: usize = 64;
 
 /// Runs the daemon until SIGTERM or SIGINT.
@@ -59,7 +61,8 @@ pub fn run(config: Config) -> anyhow::Result<()> {
 
     let runtime = tokio::runtime::Builder::new_current_thread().enable_all().build()?;
     let stop = Arc::new(AtomicBool::new(false));
-    let (triggers, receiver) = Triggers::channel(TRIGGER_QUEUE, status.clone());
+    let queue = Arc::new(TriggerQueue::new(TRIGGER_QUEUE));
+    let triggers = Triggers::new(queue.clone(), status.clone());
     let steadiness = Arc::new(Steadiness::default());
 
     // Sockets are bound inside the runtime and owned by their tasks, which remove Unix socket files
@@ -93,7 +96,7 @@ pub fn run(config: Config) -> anyhow::Result<()> {
         .name("relocalise".into())
         .spawn(move || {
             let _alive = alive;
-            worker.run(receiver);
+            worker.run(&queue);
         })
         .context("cannot start the relocalisation thread")?;
     info!("relocd running: source {}, publishing to {}", config.source, targets(&config));

@@ -62,9 +62,8 @@ pub struct StatusReport {
     pub model_error: Option<String>,
     /// Triggers received.
     pub triggers: TriggerCounts,
-    /// Triggers dropped because too many were waiting.
-    pub triggers_dropped: u64,
-    /// Triggers that joined a burst another trigger had started.
+    /// Triggers answered by another trigger's burst: they arrived together, or joined a waiting
+    /// trigger of their kind because the queue was full. None is ever dropped.
     pub coalesced: u64,
     /// Bursts run.
     pub bursts: u64,

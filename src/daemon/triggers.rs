@@ -11,9 +11,9 @@ use std::time::{Duration, Instant};
 
 use tokio::io::AsyncReadExt;
 use tokio::net::UnixStream;
-use tokio::sync::mpsc;
 use tracing::{debug, info, warn};
 
+use super::queue::{Queued, TriggerQueue};
 use super::sockets::{Datagram, MAX_DATAGRAM, Peer};
 use super::source::unix_now;
 use super::status::{GameInfo, Status};
@@ -27,9 +27,6 @@ use crate::protocol::message::TriggerKind;
 const SENSORS_FRESH: Duration = Duration::from_millis(300);
 /// LoLA's stream is dropped and re-read when this much arrives without a whole message.
 const MAX_LOLA_BUFFER: usize = 64 * 1024;
-
-/// Why a trigger was refused when too many wait.
-const TRIGGER_QUEUE_FULL: &str = "too many triggers are waiting for the relocalisation thread";
 
 /// A request to relocalise.
 #[derive(Clone, Debug, PartialEq)]
@@ -51,38 +48,33 @@ pub struct TriggerEvent {
 /// Hands triggers to the relocalisation thread.
 #[derive(Clone, Debug)]
 pub struct Triggers {
-    sender: mpsc::Sender<TriggerEvent>,
+    queue: Arc<TriggerQueue>,
     next_id: Arc<AtomicU64>,
     status: Arc<Status>,
 }
 
 impl Triggers {
-    /// A handle and the receiving end, holding at most `capacity` waiting triggers.
-    pub fn channel(capacity: usize, status: Arc<Status>) -> (Self, mpsc::Receiver<TriggerEvent>) {
-        let (sender, receiver) = mpsc::channel(capacity);
-        (Self { sender, next_id: Arc::new(AtomicU64::new(1)), status }, receiver)
+    /// A handle on `queue`.
+    pub fn new(queue: Arc<TriggerQueue>, status: Arc<Status>) -> Self {
+        Self { queue, next_id: Arc::new(AtomicU64::new(1)), status }
     }
 
-    /// Queues a trigger and returns its id; `None` (logged and counted) when the queue is full.
-    pub fn fire(&self, kind: TriggerKind, reason: Option<String>, head_yaw: Option<f64>) -> Option<u64> {
+    /// Queues a trigger; returns its id and the id of the trigger whose message will answer it (its
+    /// own, or a waiting one of its kind when the queue is full).
+    pub fn fire(&self, kind: TriggerKind, reason: Option<String>, head_yaw: Option<f64>) -> (u64, u64) {
         let id = self.next_id.fetch_add(1, Ordering::Relaxed);
         self.status.count_trigger(kind);
         let event = TriggerEvent { id, kind, reason, head_yaw, at: Instant::now(), t: unix_now() };
-        info!(
-            "trigger {id}: {kind:?}{}",
-            event.reason.as_deref().map(|r| format!(" ({r})")).unwrap_or_default()
-        );
-        match self.sender.try_send(event) {
-            Ok(()) => Some(id),
-            Err(mpsc::error::TrySendError::Full(_)) => {
-                warn!("trigger {id} refused: {TRIGGER_QUEUE_FULL}");
-                self.status.update(|report| report.triggers_dropped += 1);
-                None
+        let reason = event.reason.as_deref().map(|r| format!(" ({r})")).unwrap_or_default();
+        match self.queue.push(event) {
+            Queued::Waiting => {
+                info!("trigger {id}: {kind:?}{reason}");
+                (id, id)
             }
-            Err(mpsc::error::TrySendError::Closed(_)) => {
-                warn!("trigger {id} refused: the relocalisation thread has stopped");
-                self.status.update(|report| report.triggers_dropped += 1);
-                None
+            Queued::Joined(answered_by) => {
+                debug!("trigger {id}: {kind:?}{reason}, joins waiting trigger {answered_by} (queue full)");
+                self.status.update(|report| report.coalesced += 1);
+                (id, answered_by)
             }
         }
     }
@@ -328,8 +320,12 @@ pub async fn control(socket: Datagram, limit: usize, triggers: Triggers, status:
         let answer = match request {
             Ok(ControlRequest::Relocalise(request)) => {
                 match triggers.fire(TriggerKind::Request, request.reason, request.head_yaw) {
-                    Some(id) => serde_json::json!({ "accepted": { "trigger": id } }),
-                    None => serde_json::json!({ "error": format!("{TRIGGER_QUEUE_FULL}; try again") }),
+                    (id, answered_by) if answered_by == id => {
+                        serde_json::json!({ "accepted": { "trigger": id } })
+                    }
+                    (id, answered_by) => {
+                        serde_json::json!({ "accepted": { "trigger": id, "coalesced_into": answered_by } })
+                    }
                 }
             }
             Ok(ControlRequest::Status(_)) => serde_json::json!({ "status": status.snapshot() }),
@@ -360,14 +356,16 @@ mod tests {
         assert_eq!(next_msgpack_value(b""), None);
     }
 
-    #[tokio::test]
-    async fn a_full_queue_drops_and_counts_the_trigger() {
+    #[test]
+    fn a_trigger_beyond_the_queue_is_answered_by_a_waiting_one_and_counted() {
         let status = Arc::new(Status::new("sim".into(), "model".into()));
-        let (triggers, mut receiver) = Triggers::channel(1, status.clone());
-        assert_eq!(triggers.fire(TriggerKind::Request, None, None), Some(1));
-        assert_eq!(triggers.fire(TriggerKind::Fall, None, None), None);
+        let queue = Arc::new(TriggerQueue::new(1));
+        let triggers = Triggers::new(queue.clone(), status.clone());
+        assert_eq!(triggers.fire(TriggerKind::Request, None, None), (1, 1));
+        assert_eq!(triggers.fire(TriggerKind::Request, None, None), (2, 1));
+        assert_eq!(triggers.fire(TriggerKind::Fall, None, None), (3, 3));
         let report = status.snapshot();
-        assert_eq!((report.triggers.request, report.triggers.fall, report.triggers_dropped), (1, 1, 1));
-        assert_eq!(receiver.recv().await.unwrap().id, 1);
+        assert_eq!((report.triggers.request, report.triggers.fall, report.coalesced), (2, 1, 1));
+        assert_eq!(queue.drain().iter().map(|event| event.id).collect::<Vec<_>>(), [1, 3]);
     }
 }

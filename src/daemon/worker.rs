@@ -6,11 +6,11 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use tokio::sync::mpsc;
 use tracing::{info, warn};
 
 use super::config::BurstConfig;
 use super::publish::Publisher;
+use super::queue::TriggerQueue;
 use super::source::{CaptureRequest, FrameSource, sleep_unless_stopped, unix_now};
 use super::status::Status;
 use super::triggers::{Steadiness, TriggerEvent};
@@ -71,10 +71,10 @@ struct BurstTimes {
 
 impl Worker {
     /// Runs until the trigger channel closes or `stop` is set.
-    pub fn run(mut self, mut triggers: mpsc::Receiver<TriggerEvent>) {
+    pub fn run(mut self, triggers: &TriggerQueue) {
         let mut seq = 0;
         let mut last_burst: Option<Instant> = None;
-        while let Some(first) = triggers.blocking_recv() {
+        while let Some(first) = triggers.next(&self.stop) {
             let mut batch = vec![first];
             if let Some(last) = last_burst {
                 let ready = last + Duration::from_millis(self.burst.min_interval_ms);
@@ -83,9 +83,7 @@ impl Worker {
                 }
             }
             self.settle();
-            while let Ok(more) = triggers.try_recv() {
-                batch.push(more);
-            }
+            batch.extend(triggers.drain());
             if self.stop.load(Ordering::Relaxed) {
                 break;
             }

@@ -162,3 +162,50 @@ fn sighup_keeps_the_running_model_over_a_corrupt_file_and_loads_a_valid_one() {
     assert_eq!(daemon.message().model.id, "squeezenet-half-point-fp32-v1");
     daemon.stop();
 }
+
+/// A storm of requests and a flapping penalty at once: bursts stay rate-limited, and every trigger is
+/// answered by a message, its own or (beyond the 64 that wait) that of the waiting trigger the control
+/// answer names. Nothing is refused or lost: every trigger counted either started a burst or is
+/// counted as coalesced into one.
+#[test]
+fn a_trigger_storm_is_answered_in_full_by_a_bounded_number_of_bursts() {
+    let daemon = Daemon::start("replay:{sample}", &["--burst", "1"]);
+    let mut awaited = std::collections::BTreeSet::new();
+    let mut joined = 0;
+    for request in 0..300u32 {
+        if request % 6 == 0 {
+            let penalty = if request % 12 == 0 { Penalty::RequestForPickup } else { Penalty::None };
+            daemon.send_gamecontroller(&packet(penalty, (request / 6) as u8));
+        }
+        let accepted = &daemon.control(br#"{"relocalise": {"reason": "storm"}}"#)["accepted"];
+        let trigger = accepted["trigger"].as_u64().expect("every request is accepted");
+        if let Some(into) = accepted["coalesced_into"].as_u64() {
+            assert!(into < trigger, "joins an earlier trigger");
+            joined += 1;
+            awaited.insert(into);
+        } else {
+            awaited.insert(trigger);
+        }
+    }
+    assert!(joined > 0, "300 requests at once should overflow the queue of 64");
+
+    let mut messages = 0;
+    while !awaited.is_empty() {
+        for trigger in &daemon.message().triggers {
+            awaited.remove(&trigger.id);
+        }
+        messages += 1;
+    }
+    // The last penalty returns may still be waiting for a burst of their own.
+    let status = daemon.status_when(|status| {
+        let counted: u64 = ["request", "penalty_return", "fall", "pick_up"]
+            .iter()
+            .map(|kind| status["triggers"][kind].as_u64().unwrap())
+            .sum();
+        counted == status["bursts"].as_u64().unwrap() + status["coalesced"].as_u64().unwrap()
+    });
+    assert_eq!(status["triggers"]["request"], 300);
+    assert_eq!(status["triggers"]["penalty_return"], 25, "{status}");
+    assert!(messages < 30, "{messages} bursts for a storm: they should share");
+    daemon.stop();
+}
