@@ -1,14 +1,17 @@
 //! Faults the daemon survives: packets from the wrong GameController, publish targets that are missing,
-//! refusing, or come and go, oversized datagrams, and a model file replaced by a corrupt one.
+//! refusing, or come and go, oversized datagrams, a model file replaced by a corrupt one, a trigger
+//! storm, and frame senders that flood, break off or stop.
 
+use std::io::Write;
 use std::net::UdpSocket;
-use std::os::unix::net::UnixDatagram;
+use std::os::unix::net::{UnixDatagram, UnixStream};
 use std::time::Duration;
 
+use relocd::protocol::frame_header::FrameHeader;
 use relocd::protocol::gamecontroller::Penalty;
 use relocd::protocol::message::{Message, TriggerKind};
 
-use crate::harness::Daemon;
+use crate::harness::{Daemon, sample_yuyv};
 use crate::triggers::packet;
 
 /// Neither a second GameController, nor a duplicate, nor an old packet replayed can fake the end of a
@@ -207,5 +210,66 @@ fn a_trigger_storm_is_answered_in_full_by_a_bounded_number_of_bursts() {
     assert_eq!(status["triggers"]["request"], 300);
     assert_eq!(status["triggers"]["penalty_return"], 25, "{status}");
     assert!(messages < 30, "{messages} bursts for a storm: they should share");
+    daemon.stop();
+}
+
+/// Forwarded frames: a sender that stops mid-frame costs that frame; a flood keeps the newest
+/// `frames.queue` frames and counts the rest; a camera that stops mid-burst gives a burst of the frames
+/// that came, the next trigger with no frames gets a failure message, and frames that come back are
+/// used for the one after.
+#[test]
+fn a_frame_sender_that_floods_breaks_off_or_stops_costs_only_its_own_frames() {
+    let daemon = Daemon::start("frames:unix:{dir}/frames", &["--burst", "3"]);
+    let frames = daemon.socket("frames");
+    let image = sample_yuyv();
+    let header = FrameHeader { width: image.width(), height: image.height(), timestamp: 1.0, camera: None };
+    let frame = [&header.to_bytes()[..], image.as_bytes()].concat();
+
+    // Half a frame, then the connection closes.
+    let mut broken = UnixStream::connect(&frames).unwrap();
+    broken.write_all(&frame[..frame.len() / 2]).unwrap();
+    drop(broken);
+    // A flood: 40 frames as fast as the socket takes them, more than the queue of 8 holds.
+    let mut flood = UnixStream::connect(&frames).unwrap();
+    for _ in 0..40 {
+        flood.write_all(&frame).unwrap();
+    }
+    drop(flood);
+    let status = daemon.status_when(|status| status["frames_dropped"].as_u64() >= Some(32));
+    assert_eq!(status["rejected"]["frames"], 1, "the broken frame: {status}");
+
+    // The camera delivers one frame of the burst of 3 and stops: the burst uses what came.
+    let sent = frame.clone();
+    let path = frames.clone();
+    let one_frame = std::thread::spawn(move || {
+        std::thread::sleep(Duration::from_millis(300));
+        UnixStream::connect(&path).unwrap().write_all(&sent).unwrap();
+    });
+    daemon.control(br#"{"relocalise": {}}"#);
+    let partial = daemon.message();
+    one_frame.join().unwrap();
+    assert_eq!((partial.frames.requested, partial.frames.used), (3, 1), "{:?}", partial.failure);
+    assert!(partial.failure.is_none());
+
+    // No frames at all: a failure message for this trigger...
+    daemon.control(br#"{"relocalise": {}}"#);
+    let failed = daemon.message();
+    assert!(failed.failure.as_deref().unwrap_or_default().contains("no frame"), "{:?}", failed.failure);
+
+    // ...and frames that come back are used for the next one.
+    let sender = std::thread::spawn(move || {
+        let mut stream = UnixStream::connect(&frames).unwrap();
+        for _ in 0..30 {
+            if stream.write_all(&frame).is_err() {
+                break;
+            }
+            std::thread::sleep(Duration::from_millis(40));
+        }
+    });
+    std::thread::sleep(Duration::from_millis(100));
+    daemon.control(br#"{"relocalise": {}}"#);
+    let recovered = daemon.message();
+    assert_eq!(recovered.frames.used, 3, "{:?}", recovered.failure);
+    sender.join().unwrap();
     daemon.stop();
 }
