@@ -8,6 +8,7 @@ pub mod client;
 pub mod daemon;
 pub mod eval;
 pub mod frame;
+pub mod fuzzing;
 pub mod geometry;
 pub mod posture;
 pub mod protocol;

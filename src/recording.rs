@@ -115,6 +115,13 @@ pub struct FrameRecord {
 }
 
 impl FrameRecord {
+    /// Parses and checks one line of `frames.jsonl`.
+    pub fn parse_line(line: &str) -> Result<Self, String> {
+        let record: FrameRecord = serde_json::from_str(line).map_err(|error| error.to_string())?;
+        record.validate()?;
+        Ok(record)
+    }
+
     /// Checks what serde cannot: a usable relative path, a known format, a finite time, and a size for
     /// raw frames.
     fn validate(&self) -> Result<FrameFormat, String> {
@@ -160,9 +167,7 @@ impl Recording {
             }
             let bad =
                 |reason: String| RecordingError::BadRecord { path: index.clone(), line: number + 1, reason };
-            let record: FrameRecord = serde_json::from_str(&line).map_err(|error| bad(error.to_string()))?;
-            record.validate().map_err(bad)?;
-            records.push(record);
+            records.push(FrameRecord::parse_line(&line).map_err(bad)?);
         }
         Ok(Self { directory: directory.to_path_buf(), records })
     }

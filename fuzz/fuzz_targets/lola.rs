@@ -1,0 +1,4 @@
+#![no_main]
+//! `relocd::fuzzing::lola`: see src/fuzzing.rs for the contract it checks.
+
+libfuzzer_sys::fuzz_target!(|data: &[u8]| relocd::fuzzing::lola(data));

@@ -1,0 +1,91 @@
+//! One entry point per input path, shared by the cargo-fuzz targets in `fuzz/` and by the corpus replay
+//! in `tests/fuzz_corpus.rs`. Each hands arbitrary bytes to a decoder and checks its contract: a value
+//! that passes the decoder's own validation, or an error — and, where an encoder exists, that encoding
+//! the value and decoding it again gives the same value. A broken contract panics, which is what a
+//! fuzzer looks for.
+
+use std::path::Path;
+
+use crate::daemon::config::Config;
+use crate::frame::YuyvImage;
+use crate::protocol::control::ControlRequest;
+use crate::protocol::frame_header::{FrameHeader, HEADER_SIZE};
+use crate::protocol::gamecontroller::GameControlData;
+use crate::protocol::lola::LolaState;
+use crate::recording::FrameRecord;
+use crate::relocaliser::{Model, ModelContract};
+
+/// The input paths, as the fuzz targets and corpus directories are named.
+pub const TARGETS: [&str; 7] = ["gamecontroller", "lola", "control", "frame", "model", "recording", "config"];
+
+/// Runs `target`'s check on `bytes`; false for an unknown target.
+pub fn check(target: &str, bytes: &[u8]) -> bool {
+    match target {
+        "gamecontroller" => gamecontroller(bytes),
+        "lola" => lola(bytes),
+        "control" => control(bytes),
+        "frame" => frame(bytes),
+        "model" => model(bytes),
+        "recording" => recording(bytes),
+        "config" => config(bytes),
+        _ => return false,
+    }
+    true
+}
+
+/// A GameController packet: a parsed packet encodes to bytes that parse to the same packet.
+pub fn gamecontroller(bytes: &[u8]) {
+    if let Ok(packet) = GameControlData::parse(bytes) {
+        assert_eq!(GameControlData::parse(&packet.to_bytes()).as_ref(), Ok(&packet));
+    }
+}
+
+/// A forwarded LoLA state message (msgpack): decodes or errs, never panics.
+pub fn lola(bytes: &[u8]) {
+    let _ = LolaState::from_msgpack(bytes);
+}
+
+/// A control request: a parsed request serialises to JSON that parses to the same request.
+pub fn control(bytes: &[u8]) {
+    if let Ok(request) = ControlRequest::parse(bytes) {
+        let json = serde_json::to_vec(&request).expect("a request serialises");
+        assert_eq!(ControlRequest::parse(&json), Ok(request));
+    }
+}
+
+/// A forwarded frame, header then payload: a parsed header round-trips, and its payload size is
+/// exactly what makes a YUYV image of its size.
+pub fn frame(bytes: &[u8]) {
+    let Some((header, payload)) = bytes.split_first_chunk::<HEADER_SIZE>() else { return };
+    if let Ok(parsed) = FrameHeader::parse(header) {
+        assert_eq!(FrameHeader::parse(&parsed.to_bytes()), Ok(parsed));
+        let size = parsed.payload_size();
+        let image = YuyvImage::new(parsed.width, parsed.height, payload.to_vec());
+        assert_eq!(image.is_ok(), payload.len() == size, "payload {} for a header of {size}", payload.len());
+    }
+}
+
+/// An ONNX model file with its contract: loads or errs, never panics; a loaded model's contract
+/// reads back from its own JSON.
+pub fn model(bytes: &[u8]) {
+    if let Ok(model) = Model::from_bytes(bytes, "fuzz") {
+        let json = serde_json::to_string(model.contract()).expect("a contract serialises");
+        assert!(ModelContract::from_json(&json).is_ok());
+    }
+}
+
+/// A line of a recording's `frames.jsonl`: parses and validates, or errs.
+pub fn recording(bytes: &[u8]) {
+    if let Ok(line) = std::str::from_utf8(bytes) {
+        let _ = FrameRecord::parse_line(line);
+    }
+}
+
+/// A TOML config file: parses or errs, and validation of what parsed never panics.
+pub fn config(bytes: &[u8]) {
+    if let Ok(text) = std::str::from_utf8(bytes) {
+        if let Ok(config) = Config::parse(text, Path::new("fuzz.toml")) {
+            let _ = config.validate();
+        }
+    }
+}
