@@ -72,6 +72,15 @@ fn truncated_corrupt_and_foreign_files_are_rejected() {
     assert!(load_error(&empty).ends_with("the file is empty"));
 }
 
+/// Found by fuzzing (fuzz/corpus/model/): a graph output that no node produces made tract panic.
+#[test]
+fn a_graph_output_without_a_producer_is_an_error_not_a_panic() {
+    let path =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz/corpus/model/graph-output-without-producer.onnx");
+    let error = load_error(&path);
+    assert!(error.contains("tract cannot read this graph"), "{error}");
+}
+
 #[test]
 fn wrong_size_frames_give_a_clear_error() {
     let relocaliser = Relocaliser::new(Model::load(&tiny("valid.onnx")).unwrap());

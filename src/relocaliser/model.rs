@@ -175,7 +175,8 @@ impl Model {
             contract.representation = representation;
         }
 
-        let model = onnx.model_for_proto_model(&proto).map_err(|error| graph_error(format!("{error:#}")))?;
+        let model = without_panics(|| onnx.model_for_proto_model(&proto))
+            .map_err(|error| graph_error(format!("{error:#}")))?;
         // The decoded protobuf holds a copy of every weight: free it before tract optimises the graph,
         // which is where loading peaks.
         drop(proto);
@@ -206,13 +207,15 @@ impl Model {
         let engine = match options.backend {
             Backend::Tract => {
                 let shape = contract.input.shape.clone();
-                let plan = model
-                    .with_input_fact(0, f32::fact(&shape).into())
-                    .and_then(|model| model.into_optimized())
-                    .and_then(|model| model.into_runnable())
-                    .map_err(|error| {
-                        graph_error(format!("cannot build the network for input {shape:?}: {error:#}"))
-                    })?;
+                let plan = without_panics(|| {
+                    model
+                        .with_input_fact(0, f32::fact(&shape).into())
+                        .and_then(|model| model.into_optimized())
+                        .and_then(|model| model.into_runnable())
+                })
+                .map_err(|error| {
+                    graph_error(format!("cannot build the network for input {shape:?}: {error:#}"))
+                })?;
                 Engine::Tract { plan, output_indices }
             }
             #[cfg(feature = "onnxruntime")]
@@ -286,6 +289,20 @@ impl Model {
             heading_kappa: take(3 + offset, 1)?[0],
         })
     }
+}
+
+/// Runs `build` (tract reading or optimising a graph), turning a panic into an error: tract trusts
+/// some graph invariants that a corrupt file breaks (found by fuzzing: a graph output that no node
+/// produces), and a bad model must never take the daemon down.
+fn without_panics<T>(build: impl FnOnce() -> TractResult<T>) -> TractResult<T> {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(build)).unwrap_or_else(|panic| {
+        let message = panic
+            .downcast_ref::<&str>()
+            .map(|text| text.to_string())
+            .or_else(|| panic.downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "no message".into());
+        Err(anyhow::anyhow!("tract cannot read this graph (it panicked: {message})"))
+    })
 }
 
 /// Runs tract's plan and returns the outputs at `output_indices`, flattened.
