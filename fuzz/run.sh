@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Fuzzes every input path of relocd for SECONDS each (default 60) and fails on the first crash.
 #
-#   fuzz/run.sh [SECONDS]
+#   fuzz/run.sh [SECONDS] [TARGET...]
 #
 # Needs a nightly toolchain (`rustup toolchain install nightly`) and cargo-fuzz (`cargo install
 # cargo-fuzz`): libFuzzer with AddressSanitizer. The targets are fuzz/fuzz_targets/*.rs; each calls the
@@ -12,8 +12,10 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 seconds="${1:-60}"
+shift || true
 work="${RELOCD_FUZZ_DIR:-$HOME/.cache/relocd/fuzz}"
 targets=(gamecontroller lola control frame model recording config)
+[ $# -eq 0 ] || targets=("$@")
 
 printf '%-16s %14s %10s\n' target executions "exec/s"
 for target in "${targets[@]}"; do
