@@ -70,7 +70,7 @@ struct BurstTimes {
 }
 
 impl Worker {
-    /// Runs until the trigger channel closes or `stop` is set.
+    /// Takes triggers from `triggers` until `stop` is set.
     pub fn run(mut self, triggers: &TriggerQueue) {
         let mut seq = 0;
         let mut last_burst: Option<Instant> = None;
