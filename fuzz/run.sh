@@ -14,8 +14,7 @@ cd "$(dirname "$0")/.."
 seconds="${1:-60}"
 shift || true
 work="${RELOCD_FUZZ_DIR:-$HOME/.cache/relocd/fuzz}"
-targets=(gamecontroller lola control frame model recording config)
-[ $# -eq 0 ] || targets=("$@")
+if [ $# -gt 0 ]; then targets=("$@"); else mapfile -t targets < <(cargo +nightly fuzz list); fi
 
 printf '%-16s %14s %10s\n' target executions "exec/s"
 for target in "${targets[@]}"; do

@@ -15,23 +15,19 @@ use crate::protocol::lola::LolaState;
 use crate::recording::FrameRecord;
 use crate::relocaliser::{Model, ModelContract};
 
-/// The input paths, as the fuzz targets and corpus directories are named.
-pub const TARGETS: [&str; 7] = ["gamecontroller", "lola", "control", "frame", "model", "recording", "config"];
+/// A check: panics when its decoder breaks its contract on these bytes.
+pub type Check = fn(&[u8]);
 
-/// Runs `target`'s check on `bytes`; false for an unknown target.
-pub fn check(target: &str, bytes: &[u8]) -> bool {
-    match target {
-        "gamecontroller" => gamecontroller(bytes),
-        "lola" => lola(bytes),
-        "control" => control(bytes),
-        "frame" => frame(bytes),
-        "model" => model(bytes),
-        "recording" => recording(bytes),
-        "config" => config(bytes),
-        _ => return false,
-    }
-    true
-}
+/// Each input path's check, by the name of its fuzz target and corpus directory.
+pub const TARGETS: [(&str, Check); 7] = [
+    ("gamecontroller", gamecontroller),
+    ("lola", lola),
+    ("control", control),
+    ("frame", frame),
+    ("model", model),
+    ("recording", recording),
+    ("config", config),
+];
 
 /// A GameController packet: a parsed packet encodes to bytes that parse to the same packet.
 pub fn gamecontroller(bytes: &[u8]) {

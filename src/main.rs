@@ -17,7 +17,7 @@ use relocd::geometry::{CameraIntrinsics, FieldDimensions, FieldModel, Representa
 use relocd::protocol::message::Encoding;
 use relocd::record::RecordOptions;
 use relocd::recording::{FrameFormat, Recording};
-use relocd::relocaliser::{self, Backend, LoadOptions, PlacementPrior, Relocaliser};
+use relocd::relocaliser::{self, Backend, LoadOptions, Model, PlacementPrior, Relocaliser};
 use relocd::replay::ReplayOptions;
 use relocd::sim::{DatasetSpec, Randomisation, render_dataset};
 
@@ -55,15 +55,30 @@ enum Command {
     Bench(BenchArgs),
 }
 
+/// Which model, run by which engine.
 #[derive(Debug, clap::Args)]
-struct BenchArgs {
-    /// ONNX model file [default: the built-in model].
+struct ModelArgs {
+    /// ONNX model file [default: the built-in SqueezeNet half-point model for the engine].
     #[arg(long)]
     model: Option<PathBuf>,
     /// Inference engine: tract (built in) or onnxruntime (needs the onnxruntime feature and
     /// libonnxruntime.so; ORT_DYLIB_PATH names the file). Each has its own built-in model.
     #[arg(long, value_enum)]
     backend: Option<Backend>,
+}
+
+impl ModelArgs {
+    /// Loads the model; returns it with the name to report.
+    fn load(&self) -> anyhow::Result<(Model, String)> {
+        let options = LoadOptions { backend: self.backend.unwrap_or_default(), representation: None };
+        Ok(relocaliser::load_model(self.model.as_deref(), options)?)
+    }
+}
+
+#[derive(Debug, clap::Args)]
+struct BenchArgs {
+    #[command(flatten)]
+    model: ModelArgs,
     /// Print one JSON object instead of a table.
     #[arg(long)]
     json: bool,
@@ -111,13 +126,8 @@ struct RunArgs {
     /// Frame source: v4l:DEVICE, frames:unix:PATH, replay:DIR or sim.
     #[arg(long)]
     source: Option<SourceSpec>,
-    /// ONNX model file [default: the built-in model].
-    #[arg(long)]
-    model: Option<PathBuf>,
-    /// Inference engine: tract (built in) or onnxruntime (needs the onnxruntime feature and
-    /// libonnxruntime.so; ORT_DYLIB_PATH names the file). Each has its own built-in model.
-    #[arg(long, value_enum)]
-    backend: Option<Backend>,
+    #[command(flatten)]
+    model: ModelArgs,
     /// Decode the model's outputs in this representation instead of its contract's.
     #[arg(long)]
     representation: Option<Representation>,
@@ -219,13 +229,8 @@ struct RenderArgs {
 struct ReplayArgs {
     /// Recording directory (frames.jsonl and frames); default: the sample recording in tests/data/sample.
     recording: Option<PathBuf>,
-    /// ONNX model file; default: the built-in SqueezeNet half-point model.
-    #[arg(long)]
-    model: Option<PathBuf>,
-    /// Inference engine: tract (built in) or onnxruntime (needs the onnxruntime feature and
-    /// libonnxruntime.so; ORT_DYLIB_PATH names the file). Each has its own built-in model.
-    #[arg(long, value_enum)]
-    backend: Option<Backend>,
+    #[command(flatten)]
+    model: ModelArgs,
     /// Write the metrics as JSON to this file.
     #[arg(long)]
     metrics_json: Option<PathBuf>,
@@ -333,8 +338,17 @@ fn run(args: RunArgs, log_level: Option<String>) -> anyhow::Result<()> {
         Some(path) => Config::load(path)?,
         None => Config::default(),
     };
-    let RunArgs { source, model, backend, representation, team, player, gc_port, sensors, control, .. } =
-        args;
+    let RunArgs {
+        source,
+        model: ModelArgs { model, backend },
+        representation,
+        team,
+        player,
+        gc_port,
+        sensors,
+        control,
+        ..
+    } = args;
     config.source = source.unwrap_or(config.source);
     config.model = model.or(config.model);
     config.backend = backend.unwrap_or(config.backend);
@@ -398,8 +412,7 @@ fn record(args: RecordArgs) -> anyhow::Result<()> {
 }
 
 fn bench(args: BenchArgs) -> anyhow::Result<()> {
-    let options = LoadOptions { backend: args.backend.unwrap_or_default(), representation: None };
-    let (model, name) = relocaliser::load_model(args.model.as_deref(), options)?;
+    let (model, name) = args.model.load()?;
     let frame = match &args.frame {
         Some(path) => {
             let image = image::open(path).with_context(|| format!("--frame {}", path.display()))?;
@@ -520,8 +533,7 @@ fn replay(args: ReplayArgs) -> anyhow::Result<()> {
             directory.display()
         )
     })?;
-    let options = LoadOptions { backend: args.backend.unwrap_or_default(), representation: None };
-    let (model, _) = relocaliser::load_model(args.model.as_deref(), options)?;
+    let (model, _) = args.model.load()?;
     let contract = model.contract();
     info!(
         model = %contract.model_id,

@@ -4,7 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
-use relocd::fuzzing::{TARGETS, check};
+use relocd::fuzzing::TARGETS;
 use relocd::protocol::frame_header::FrameHeader;
 use relocd::protocol::gamecontroller::{
     GameControlData, GamePhase, GameState, MAX_PLAYERS, Penalty, RobotInfo, SetPlay, TeamInfo,
@@ -17,7 +17,7 @@ fn corpus() -> PathBuf {
 #[test]
 fn every_corpus_input_keeps_its_decoder_s_contract() {
     let mut checked = 0;
-    for target in TARGETS {
+    for (target, check) in TARGETS {
         let directory = corpus().join(target);
         let mut files: Vec<PathBuf> = std::fs::read_dir(&directory)
             .unwrap_or_else(|error| panic!("{}: {error}", directory.display()))
@@ -27,7 +27,7 @@ fn every_corpus_input_keeps_its_decoder_s_contract() {
         assert!(!files.is_empty(), "no seeds for {target}");
         for file in files {
             let bytes = std::fs::read(&file).unwrap();
-            assert!(check(target, &bytes), "unknown target {target}");
+            check(&bytes);
             checked += 1;
         }
     }

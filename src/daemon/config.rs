@@ -11,7 +11,7 @@ use thiserror::Error;
 
 use crate::geometry::Representation;
 use crate::protocol::message::Encoding;
-use crate::relocaliser::Backend;
+use crate::relocaliser::{Backend, LoadOptions};
 
 /// A configuration that cannot be used.
 #[derive(Debug, Error)]
@@ -116,6 +116,11 @@ impl Config {
         let text = std::fs::read_to_string(path)
             .map_err(|source| ConfigError::Read { path: path.to_path_buf(), source })?;
         Self::parse(&text, path)
+    }
+
+    /// How to load the model: the configured engine and representation.
+    pub fn load_options(&self) -> LoadOptions {
+        LoadOptions { backend: self.backend, representation: self.representation }
     }
 
     /// Parses the text of a config file; `path` names it in errors.

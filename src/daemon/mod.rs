@@ -32,7 +32,7 @@ use crate::geometry::FieldModel;
 use crate::posture::{PostureConfig, PostureDetector};
 use crate::protocol::gamecontroller::PenaltyWatch;
 use crate::recording::Recording;
-use crate::relocaliser::{self, Backend, LoadOptions, Model, Relocaliser};
+use crate::relocaliser::{self, Backend, Model, Relocaliser};
 
 /// Triggers waiting for the relocalisation thread on their own; more join a waiting one of their kind.
 const TRIGGER_QUEUE: usize = 64;
@@ -41,8 +41,7 @@ const TRIGGER_QUEUE: usize = 64;
 pub fn run(config: Config) -> anyhow::Result<()> {
     config.validate()?;
     apply_process_settings(&config)?;
-    let options = LoadOptions { backend: config.backend, representation: config.representation };
-    let (model, _) = relocaliser::load_model(config.model.as_deref(), options)?;
+    let (model, _) = relocaliser::load_model(config.model.as_deref(), config.load_options())?;
     let contract = model.contract();
     match config.backend {
         Backend::Tract => info!(
@@ -131,8 +130,7 @@ fn reload_model(config: &Config, replacement: &ModelSlot, status: &Status) {
         warn!("SIGHUP: no model file to reload (the built-in model is in use)");
         return;
     };
-    let options = LoadOptions { backend: config.backend, representation: config.representation };
-    match relocaliser::load_model(Some(path), options) {
+    match relocaliser::load_model(Some(path), config.load_options()) {
         Ok((model, _)) => {
             let id = model.contract().model_id.clone();
             info!("SIGHUP: loaded {} ({id}); the next burst uses it", path.display());

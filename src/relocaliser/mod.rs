@@ -1,5 +1,6 @@
 //! The relocaliser: the model contract, preprocessing a camera frame into the network's input, running
-//! the network (tract, or ONNX Runtime with the `onnxruntime` feature), and decoding its outputs into weighted full-field hypotheses.
+//! the network (tract, or ONNX Runtime with the `onnxruntime` feature), and decoding its outputs into
+//! weighted full-field hypotheses.
 
 pub mod contract;
 pub mod decode;
@@ -55,7 +56,7 @@ pub fn built_in_model(backend: Backend) -> BuiltInModel {
 
 /// Loads tract's built-in model.
 pub fn default_model() -> Result<Model, ModelError> {
-    Model::from_bytes(DEFAULT_MODEL.bytes, &format!("<built-in {}>", DEFAULT_MODEL.name))
+    load_model(None, LoadOptions::default()).map(|(model, _)| model)
 }
 
 /// Loads the model file at `path`, or the built-in model for `options.backend` when there is none;

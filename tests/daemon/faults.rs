@@ -11,7 +11,7 @@ use relocd::protocol::frame_header::FrameHeader;
 use relocd::protocol::gamecontroller::Penalty;
 use relocd::protocol::message::{Message, TriggerKind};
 
-use crate::harness::{Daemon, sample_yuyv};
+use crate::harness::{Daemon, sample_yuyv, stream_frames};
 use crate::triggers::packet;
 
 /// Neither a second GameController, nor a duplicate, nor an old packet replayed can fake the end of a
@@ -257,15 +257,7 @@ fn a_frame_sender_that_floods_breaks_off_or_stops_costs_only_its_own_frames() {
     assert!(failed.failure.as_deref().unwrap_or_default().contains("no frame"), "{:?}", failed.failure);
 
     // ...and frames that come back are used for the next one.
-    let sender = std::thread::spawn(move || {
-        let mut stream = UnixStream::connect(&frames).unwrap();
-        for _ in 0..30 {
-            if stream.write_all(&frame).is_err() {
-                break;
-            }
-            std::thread::sleep(Duration::from_millis(40));
-        }
-    });
+    let sender = stream_frames(UnixStream::connect(&frames).unwrap(), frame, 30, Duration::from_millis(40));
     std::thread::sleep(Duration::from_millis(100));
     daemon.control(br#"{"relocalise": {}}"#);
     let recovered = daemon.message();

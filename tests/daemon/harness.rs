@@ -1,9 +1,11 @@
 //! The daemon under test: `relocd run` on loopback and Unix sockets in a temporary directory.
 
+use std::io::Write;
 use std::net::UdpSocket;
-use std::os::unix::net::UnixDatagram;
+use std::os::unix::net::{UnixDatagram, UnixStream};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
+use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use relocd::frame::YuyvImage;
@@ -175,4 +177,17 @@ pub fn sample_yuyv() -> YuyvImage {
 
 pub fn sample() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/sample")
+}
+
+/// Writes `frame` (forwarded-frame header and payload) to `stream` `count` times, `gap` apart, on a
+/// thread, like a camera forwarding at its rate; stops early when relocd closes the connection.
+pub fn stream_frames(mut stream: UnixStream, frame: Vec<u8>, count: usize, gap: Duration) -> JoinHandle<()> {
+    std::thread::spawn(move || {
+        for _ in 0..count {
+            if stream.write_all(&frame).is_err() {
+                break;
+            }
+            std::thread::sleep(gap);
+        }
+    })
 }

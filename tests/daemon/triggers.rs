@@ -15,7 +15,7 @@ use relocd::protocol::gamecontroller::{
 use relocd::protocol::message::TriggerKind;
 use relocd::recording::Recording;
 
-use crate::harness::{Daemon, PLAYER, TEAM, sample, sample_yuyv};
+use crate::harness::{Daemon, PLAYER, TEAM, sample, sample_yuyv, stream_frames};
 
 /// How far the burst's best hypothesis may lie from the rendered robot (the model's median is
 /// ~0.4 m per frame, 0.2 m for penalty-return bursts).
@@ -214,27 +214,15 @@ fn forwarded_frames_are_used_and_a_lying_header_is_dropped() {
 
     let image = sample_yuyv();
     let camera = Recording::open(&sample()).unwrap().records()[0].camera.unwrap_or(CameraPose::STANDING);
-    let sender = std::thread::spawn(move || {
-        let mut stream = UnixStream::connect(&frames).unwrap();
-        let header = FrameHeader {
-            width: image.width(),
-            height: image.height(),
-            timestamp: 2.0,
-            camera: Some(camera),
-        };
-        // An impossible camera pitch drops that frame but keeps the connection in step.
-        let mut tilted = header.to_bytes();
-        tilted[36..40].copy_from_slice(&3.0f32.to_le_bytes());
-        stream.write_all(&tilted).unwrap();
-        stream.write_all(image.as_bytes()).unwrap();
-        for _ in 0..40 {
-            if stream.write_all(&header.to_bytes()).and_then(|()| stream.write_all(image.as_bytes())).is_err()
-            {
-                break;
-            }
-            std::thread::sleep(Duration::from_millis(50));
-        }
-    });
+    let header =
+        FrameHeader { width: image.width(), height: image.height(), timestamp: 2.0, camera: Some(camera) };
+    let mut stream = UnixStream::connect(&frames).unwrap();
+    // An impossible camera pitch drops that frame but keeps the connection in step.
+    let mut tilted = header.to_bytes();
+    tilted[36..40].copy_from_slice(&3.0f32.to_le_bytes());
+    stream.write_all(&[&tilted[..], image.as_bytes()].concat()).unwrap();
+    let frame = [&header.to_bytes()[..], image.as_bytes()].concat();
+    let sender = stream_frames(stream, frame, 40, Duration::from_millis(50));
     std::thread::sleep(Duration::from_millis(200));
     daemon.control(br#"{"relocalise": {}}"#);
     let message = daemon.message();
