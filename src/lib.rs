@@ -14,6 +14,7 @@ pub mod posture;
 pub mod protocol;
 pub mod record;
 pub mod recording;
+pub mod refine;
 pub mod relocaliser;
 pub mod replay;
 #[cfg(feature = "report")]

@@ -17,6 +17,7 @@ use relocd::geometry::{CameraIntrinsics, FieldDimensions, FieldModel, Representa
 use relocd::protocol::message::Encoding;
 use relocd::record::RecordOptions;
 use relocd::recording::{FrameFormat, Recording};
+use relocd::refine::LineRefiner;
 use relocd::relocaliser::{self, Backend, LoadOptions, Model, PlacementPrior, Relocaliser};
 use relocd::replay::ReplayOptions;
 use relocd::sim::{DatasetSpec, Randomisation, render_dataset};
@@ -242,6 +243,10 @@ struct ReplayArgs {
     /// when --burst is 1); the burst metrics then show what the prior buys.
     #[arg(long, value_enum)]
     prior: Option<PriorArg>,
+    /// Verify and refine each burst's hypotheses (each frame's when --burst is 1) against the field
+    /// lines in its frames; needs the recording's camera poses. The metrics gain a `refined` block.
+    #[arg(long)]
+    refine: bool,
     /// Write plots (error scatter, field map with true and predicted poses) as PNG into this directory.
     #[cfg(feature = "report")]
     #[arg(long, value_name = "DIR")]
@@ -543,6 +548,7 @@ fn replay(args: ReplayArgs) -> anyhow::Result<()> {
         frames = recording.records().len(),
         "replaying"
     );
+    let refiner = args.refine.then(|| LineRefiner::new(&FieldModel::new(contract.field.clone())));
     let relocaliser = Relocaliser::new(model);
     let stdout = std::io::stdout();
     let summary = relocd::replay::replay(
@@ -551,6 +557,7 @@ fn replay(args: ReplayArgs) -> anyhow::Result<()> {
         &ReplayOptions {
             burst: args.burst.into(),
             prior: args.prior.map(|PriorArg::PenaltyReturn| PlacementPrior::penalty_return()),
+            refiner: refiner.as_ref(),
         },
         &mut stdout.lock(),
     )

@@ -6,9 +6,10 @@ use std::io::Write;
 use serde::Serialize;
 use tracing::warn;
 
-use crate::eval::{BurstEvaluation, Evaluation, Metrics, Sample};
-use crate::geometry::FieldPose;
+use crate::eval::{BurstEvaluation, Evaluation, Metrics, RefinedEvaluation, Sample};
+use crate::geometry::{CameraIntrinsics, FieldPose};
 use crate::recording::{FrameRecord, Recording};
+use crate::refine::{FramePercepts, LineEvidence, LineRefiner};
 use crate::relocaliser::{
     BurstEstimate, PlacementPrior, PoseSigma, Relocalisation, Relocaliser, Timings, fuse,
 };
@@ -50,6 +51,9 @@ pub struct WireFusedHypothesis {
     pub weight: f64,
     /// Its spread.
     pub sigma: PoseSigma,
+    /// What the field lines said about it, when refinement is on.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lines: Option<LineEvidence>,
 }
 
 /// The line written for a fused burst, after the lines of its frames.
@@ -83,6 +87,7 @@ impl BurstReport {
                             pose: WirePose::from(&h.pose),
                             weight: h.weight,
                             sigma: h.sigma,
+                            lines: h.lines,
                         })
                         .collect(),
                 ),
@@ -187,12 +192,15 @@ pub struct ReplaySummary {
 }
 
 /// How a replay treats consecutive frames.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct ReplayOptions {
+#[derive(Clone, Debug, Default)]
+pub struct ReplayOptions<'a> {
     /// Frames per standing robot; above 1, every `burst` consecutive frames are fused.
     pub burst: usize,
     /// A game-context prior applied to every fused burst (bursts of one frame when `burst` is 1).
     pub prior: Option<PlacementPrior>,
+    /// Verify and refine every burst (bursts of one frame when `burst` is 1) against the field lines
+    /// its frames show; frames need their camera pose in the recording.
+    pub refiner: Option<&'a LineRefiner>,
 }
 
 /// Relocalises every frame of `recording`, writing one JSON line per frame to `out`; with bursts or a
@@ -208,12 +216,17 @@ pub fn replay(
     let burst = options.burst.max(1);
     let mut evaluations = Vec::new();
     let mut burst_evaluations = Vec::new();
+    let mut refined_evaluations = Vec::new();
     let mut failed = 0;
     for group in recording.records().chunks(burst) {
         let mut predictions = Vec::with_capacity(group.len());
+        let mut percepts = Vec::new();
         for record in group {
             let head_yaw = record.camera.map_or(0.0, |camera| camera.head_yaw());
             let result = recording.load_frame(record).map_err(|error| error.to_string()).and_then(|frame| {
+                if let Some(refiner) = options.refiner {
+                    percepts.extend(frame_percepts(refiner, record, &frame));
+                }
                 relocaliser.relocalise(&frame, head_yaw).map_err(|error| error.to_string())
             });
             let report = match result {
@@ -235,13 +248,25 @@ pub fn replay(
             };
             write_line(out, &report)?;
         }
-        if burst > 1 || options.prior.is_some() {
+        if burst > 1 || options.prior.is_some() || options.refiner.is_some() {
             let mut estimate = fuse(&predictions);
+            if let (Ok(estimate), Some(truth)) = (&estimate, group[0].pose) {
+                if burst > 1 || options.prior.is_some() {
+                    let mut unrefined = estimate.clone();
+                    if let Some(prior) = &options.prior {
+                        prior.apply(&mut unrefined.hypotheses);
+                    }
+                    burst_evaluations.push(BurstEvaluation::new(&truth, &unrefined));
+                }
+            }
+            if let (Ok(estimate), Some(refiner)) = (&mut estimate, options.refiner) {
+                refiner.refine(&percepts, estimate);
+            }
             if let (Ok(estimate), Some(prior)) = (&mut estimate, &options.prior) {
                 prior.apply(&mut estimate.hypotheses);
             }
-            if let (Ok(estimate), Some(truth)) = (&estimate, group[0].pose) {
-                burst_evaluations.push(BurstEvaluation::new(&truth, estimate));
+            if let (Ok(estimate), Some(truth), Some(_)) = (&estimate, group[0].pose, options.refiner) {
+                refined_evaluations.push(RefinedEvaluation::new(&truth, estimate));
             }
             write_line(out, &BurstReport::new(group, estimate.as_ref().map_err(ToString::to_string)))?;
         }
@@ -249,9 +274,26 @@ pub fn replay(
     Ok(ReplaySummary {
         frames: recording.records().len(),
         failed,
-        metrics: Metrics::summarise(&evaluations, &burst_evaluations),
+        metrics: Metrics::summarise(&evaluations, &burst_evaluations, &refined_evaluations),
         evaluations,
     })
+}
+
+/// The line points of one frame, or none (with a warning) when its camera pose is not recorded or the
+/// frame cannot be searched.
+fn frame_percepts(
+    refiner: &LineRefiner,
+    record: &FrameRecord,
+    frame: &crate::frame::Frame,
+) -> Option<FramePercepts> {
+    let Some(camera) = record.camera else {
+        warn!(file = %record.file, "no camera pose recorded: frame not used for line refinement");
+        return None;
+    };
+    refiner
+        .percepts(frame, &CameraIntrinsics::nao_top(), &camera)
+        .inspect_err(|error| warn!(file = %record.file, %error, "no line points"))
+        .ok()
 }
 
 fn write_line(out: &mut impl Write, value: &impl Serialize) -> std::io::Result<()> {

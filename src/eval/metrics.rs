@@ -4,6 +4,7 @@ use serde::Serialize;
 
 use crate::geometry::angle::angle_distance;
 use crate::geometry::{FieldPose, FoldClass, Representation};
+use crate::refine::LineCheck;
 use crate::relocaliser::{BurstEstimate, Prediction};
 
 /// One evaluated frame: the truth and what the model said.
@@ -116,6 +117,77 @@ impl BurstEvaluation {
             best_of_set: *errors.iter().min_by(|a, b| a.0.total_cmp(&b.0)).expect("at least one hypothesis"),
             position_sigma: heaviest.sigma.x.hypot(heaviest.sigma.y),
         }
+    }
+}
+
+/// One burst after line refinement: its errors and what the lines did to its heaviest hypothesis.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RefinedEvaluation {
+    /// The refined hypotheses against the truth.
+    pub errors: BurstEvaluation,
+    /// What the lines did to the heaviest hypothesis (`None` if it was never checked).
+    pub check: Option<LineCheck>,
+}
+
+impl RefinedEvaluation {
+    /// Scores a refined burst against the robot's true pose.
+    pub fn new(truth: &FieldPose, estimate: &BurstEstimate) -> Self {
+        Self {
+            errors: BurstEvaluation::new(truth, estimate),
+            check: estimate.hypotheses[0].lines.map(|lines| lines.check),
+        }
+    }
+}
+
+/// Errors after line refinement, over all bursts (frames when not fused) and over those the lines fixed.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct RefinedMetrics {
+    /// Bursts (or frames) evaluated.
+    pub bursts: usize,
+    /// Share whose heaviest hypothesis the lines fixed fully (`refined`).
+    pub refined_share: f64,
+    /// Share fitted along one line family only (`partial`).
+    pub partial_share: f64,
+    /// Share with too few line points (`unrefined`).
+    pub unrefined_share: f64,
+    /// Share whose heaviest hypothesis the lines contradicted.
+    pub contradicted_share: f64,
+    /// Heaviest hypothesis vs truth, all bursts.
+    pub modelled: ErrorStats,
+    /// Closest hypothesis vs truth, all bursts.
+    pub best_of_set: ErrorStats,
+    /// Closest hypothesis vs truth where the lines fixed the pose.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub where_refined: Option<ErrorStats>,
+}
+
+impl RefinedMetrics {
+    /// Summarises refined evaluations; `None` if there are none.
+    pub fn summarise(evaluations: &[RefinedEvaluation]) -> Option<Self> {
+        if evaluations.is_empty() {
+            return None;
+        }
+        let share = |check: LineCheck| {
+            evaluations.iter().filter(|e| e.check == Some(check)).count() as f64 / evaluations.len() as f64
+        };
+        let refined: Vec<(f64, f64)> = evaluations
+            .iter()
+            .filter(|e| e.check == Some(LineCheck::Refined))
+            .map(|e| e.errors.best_of_set)
+            .collect();
+        Some(Self {
+            bursts: evaluations.len(),
+            refined_share: share(LineCheck::Refined),
+            partial_share: share(LineCheck::Partial),
+            unrefined_share: share(LineCheck::Unrefined),
+            contradicted_share: share(LineCheck::Contradicted),
+            modelled: ErrorStats::of(&evaluations.iter().map(|e| e.errors.modelled).collect::<Vec<_>>(), &[]),
+            best_of_set: ErrorStats::of(
+                &evaluations.iter().map(|e| e.errors.best_of_set).collect::<Vec<_>>(),
+                &[],
+            ),
+            where_refined: (!refined.is_empty()).then(|| ErrorStats::of(&refined, &[])),
+        })
     }
 }
 
@@ -237,6 +309,9 @@ pub struct Metrics {
     /// Fused bursts, when the replay fused them.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub bursts: Option<BurstMetrics>,
+    /// After line refinement, when the replay refined.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub refined: Option<RefinedMetrics>,
 }
 
 /// Distance bands from the fold boundary, metres.
@@ -244,7 +319,11 @@ const CUT_BANDS: [(f64, f64); 4] = [(0.0, 0.5), (0.5, 1.0), (1.0, 2.0), (2.0, f6
 
 impl Metrics {
     /// Summarises per-frame and per-burst evaluations; `None` if there are no frames.
-    pub fn summarise(evaluations: &[Evaluation], bursts: &[BurstEvaluation]) -> Option<Self> {
+    pub fn summarise(
+        evaluations: &[Evaluation],
+        bursts: &[BurstEvaluation],
+        refined: &[RefinedEvaluation],
+    ) -> Option<Self> {
         if evaluations.is_empty() {
             return None;
         }
@@ -278,6 +357,7 @@ impl Metrics {
             by_distance_to_cut,
             coverage,
             bursts: BurstMetrics::summarise(bursts),
+            refined: RefinedMetrics::summarise(refined),
         })
     }
 
@@ -306,6 +386,20 @@ impl Metrics {
             text += &row("burst model", &bursts.modelled);
             text += &row("burst best", &bursts.best_of_set);
             counts += &format!(", {} bursts", bursts.bursts);
+        }
+        if let Some(refined) = &self.refined {
+            text += &row("lines model", &refined.modelled);
+            text += &row("lines best", &refined.best_of_set);
+            if let Some(where_refined) = &refined.where_refined {
+                text += &row("  refined", where_refined);
+            }
+            counts += &format!(
+                ", lines: {:.0}% refined, {:.0}% partial, {:.0}% unrefined, {:.0}% contradicted",
+                100.0 * refined.refined_share,
+                100.0 * refined.partial_share,
+                100.0 * refined.unrefined_share,
+                100.0 * refined.contradicted_share
+            );
         }
         text + &counts
     }
@@ -374,7 +468,7 @@ mod tests {
                 sample(truth, predicted, 0.5, (i + 1) as f32).evaluate()
             })
             .collect();
-        let metrics = Metrics::summarise(&evaluations, &[]).unwrap();
+        let metrics = Metrics::summarise(&evaluations, &[], &[]).unwrap();
         assert_eq!(metrics.frames, 4);
         assert!((metrics.oracle.location_median_m - 0.25).abs() < 1e-6);
         assert!((metrics.oracle.location_mean_m - 0.4).abs() < 1e-6);
@@ -383,7 +477,7 @@ mod tests {
         assert_eq!(metrics.by_distance_to_cut[0].from_m, 1.0);
         assert_eq!(metrics.coverage[0].best_of_set.frames, 2);
         assert!((metrics.coverage[0].best_of_set.location_median_m - 0.15).abs() < 1e-6);
-        assert!(Metrics::summarise(&[], &[]).is_none());
+        assert!(Metrics::summarise(&[], &[], &[]).is_none());
         assert!(metrics.bursts.is_none());
         assert!(metrics.table().contains("oracle"));
     }

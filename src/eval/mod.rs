@@ -6,4 +6,7 @@ mod metrics;
 
 #[cfg(feature = "report")]
 pub(crate) use metrics::median;
-pub use metrics::{BurstEvaluation, BurstMetrics, Coverage, ErrorStats, Evaluation, Metrics, Sample};
+pub use metrics::{
+    BurstEvaluation, BurstMetrics, Coverage, ErrorStats, Evaluation, Metrics, RefinedEvaluation,
+    RefinedMetrics, Sample,
+};

@@ -99,6 +99,13 @@ impl FieldPose {
         Point2::new(self.x + cos * point.x - sin * point.y, self.y + sin * point.x + cos * point.y)
     }
 
+    /// Transforms a point from the field frame into the robot ground frame.
+    pub fn field_to_robot(&self, point: Point2<f64>) -> Point2<f64> {
+        let (sin, cos) = self.heading.sin_cos();
+        let (dx, dy) = (point.x - self.x, point.y - self.y);
+        Point2::new(cos * dx + sin * dy, -sin * dx + cos * dy)
+    }
+
     /// Unit vector of the heading.
     pub fn direction(&self) -> Vector2<f64> {
         let (sin, cos) = self.heading.sin_cos();

@@ -14,6 +14,7 @@ use thiserror::Error;
 use super::decode::Prediction;
 use crate::geometry::angle::angle_distance;
 use crate::geometry::{FieldPose, Hypothesis, Representation};
+use crate::refine::LineEvidence;
 
 /// Metres a radian of heading difference counts as when frames are compared.
 const METRES_PER_RADIAN: f64 = 1.0;
@@ -51,8 +52,11 @@ pub struct FusedHypothesis {
     pub pose: FieldPose,
     /// Its probability; the set's weights sum to 1.
     pub weight: f64,
-    /// Spread: the burst's scatter combined with the frames' own predicted uncertainty.
+    /// Spread: the burst's scatter combined with the frames' own predicted uncertainty (or, once
+    /// refined, the line fit's).
     pub sigma: PoseSigma,
+    /// What the field lines said about it, once checked (see [`crate::refine`]).
+    pub lines: Option<LineEvidence>,
 }
 
 /// The fused result of one burst.
@@ -154,7 +158,7 @@ pub fn fuse(predictions: &[Prediction]) -> Result<BurstEstimate, FusionError> {
                 .map(|((frame, aligned), w)| w * frame.by_class[usize::from(class ^ aligned)].weight)
                 .sum::<f64>()
                 / weights.iter().sum::<f64>();
-            FusedHypothesis { pose, weight, sigma }
+            FusedHypothesis { pose, weight, sigma, lines: None }
         })
         .collect();
     hypotheses.sort_by(|a, b| b.weight.total_cmp(&a.weight));

@@ -77,7 +77,7 @@ mod tests {
         let sigma = PoseSigma { x: 0.3, y: 0.3, theta: 0.1 };
         [pose, Symmetry::PointReflection.apply(&pose)]
             .into_iter()
-            .map(|pose| FusedHypothesis { pose, weight: 0.5, sigma })
+            .map(|pose| FusedHypothesis { pose, weight: 0.5, sigma, lines: None })
             .collect()
     }
 

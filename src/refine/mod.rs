@@ -1,0 +1,263 @@
+//! Line refinement: the network proposes, the field lines verify and refine.
+//!
+//! Each frame gives line points on the ground in the robot frame ([`percepts`]). For every hypothesis of
+//! a burst, the points are fitted to the field's lines ([`optimise`], on the [`line_map`]), starting
+//! from and held to the hypothesis; the fit is then checked: the share of points that lie on a line, and
+//! the share of the lines the camera should have seen under that pose that it did see. Hypotheses the
+//! lines contradict lose weight; the rest take the fitted pose and its σ. A hypothesis and its twin by
+//! the point symmetry see the same lines, so they always score the same: only the game prior (or the
+//! surroundings, through the network) can tell them apart.
+
+pub mod line_map;
+pub mod optimise;
+pub mod percepts;
+
+use nalgebra::{Point2, Point3, Vector3};
+use serde::Serialize;
+
+pub use line_map::LineMap;
+pub use percepts::{FramePercepts, LinePoint, PerceptError, detect};
+
+use crate::frame::Frame;
+use crate::geometry::angle::angle_distance;
+use crate::geometry::{CameraIntrinsics, CameraPose, FieldModel, FieldPose, Symmetry};
+use crate::relocaliser::{BurstEstimate, FusedHypothesis, PoseSigma};
+use optimise::{Observation, Prior, fit};
+
+/// Fewest line points a burst needs for refinement.
+pub const MIN_POINTS: usize = 12;
+/// σ across its line of a point at the robot's feet, metres.
+const POINT_SIGMA: f64 = 0.015;
+/// Camera pitch uncertainty, radians: a point's σ grows by d²/h times this at distance d.
+const PITCH_SIGMA: f64 = 0.005;
+/// Farthest line point used, metres.
+const MAX_POINT_DISTANCE: f64 = 5.0;
+/// Nearest and farthest model line the camera is expected to see, metres.
+const EXPECTED_RANGE: (f64, f64) = (0.3, 3.0);
+/// Spacing of the model-line samples checked for being seen, metres.
+const EXPECTED_SPACING: f64 = 0.1;
+/// Fewest expected samples for the unseen share to count.
+const MIN_EXPECTED: usize = 8;
+/// A point within this many σ of a line is an inlier (and always within 5 cm).
+const INLIER_SIGMAS: f64 = 2.5;
+/// Below this line quality (inlier share × seen share) the lines contradict a hypothesis.
+const CONTRADICTED_BELOW: f64 = 0.75;
+/// Weight factor on top of the quality for a contradicted hypothesis.
+const CONTRADICTED_FACTOR: f64 = 0.1;
+/// Largest line-only σ (position, metres; heading, radians) for a fit to count as fully refined.
+const REFINED_SIGMA: (f64, f64) = (0.1, 0.035);
+/// Least prior σ (position, metres; heading, radians) the search starts from.
+const MIN_PRIOR_SIGMA: (f64, f64) = (0.15, 0.09);
+/// Largest prior σ the search covers.
+const MAX_PRIOR_SIGMA: (f64, f64) = (0.6, 0.35);
+
+/// What the lines made of one hypothesis.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LineCheck {
+    /// The lines fix x, y and heading: the pose and σ are the fit's.
+    Refined,
+    /// The lines fix only some directions (one family of parallel lines): fitted, with the network's
+    /// pose holding the rest.
+    Partial,
+    /// Too few line points: the network's hypothesis as it was.
+    Unrefined,
+    /// The lines seen do not fit this pose: kept at the network's pose with its weight cut.
+    Contradicted,
+}
+
+/// The lines' evidence about one hypothesis.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct LineEvidence {
+    /// What was done with it.
+    pub check: LineCheck,
+    /// Line points used (all frames of the burst).
+    pub points: usize,
+    /// Share of the points that lie on a field line under the pose.
+    pub inlier_share: f64,
+    /// Share of the field lines the camera should have seen under the pose that it did not see;
+    /// `None` when too few lines were expected to tell.
+    pub unseen_share: Option<f64>,
+}
+
+/// Refines hypotheses against one field's lines.
+#[derive(Clone, Debug)]
+pub struct LineRefiner {
+    map: LineMap,
+    line_width: f64,
+    /// Samples along every painted line, field frame.
+    line_samples: Vec<Point2<f64>>,
+}
+
+impl LineRefiner {
+    /// Builds the distance map of `field` (once; about 0.6 MB).
+    pub fn new(field: &FieldModel) -> Self {
+        let map = LineMap::new(field);
+        let line_samples =
+            map.primitives().iter().flat_map(|primitive| primitive.samples(EXPECTED_SPACING)).collect();
+        Self { map, line_width: field.dimensions().line_width, line_samples }
+    }
+
+    /// The field's distance map.
+    pub fn map(&self) -> &LineMap {
+        &self.map
+    }
+
+    /// Finds the line points of one frame (see [`percepts::detect`]).
+    pub fn percepts(
+        &self,
+        frame: &Frame,
+        intrinsics: &CameraIntrinsics,
+        camera: &CameraPose,
+    ) -> Result<FramePercepts, PerceptError> {
+        detect(frame, intrinsics, camera, self.line_width)
+    }
+
+    /// Verifies and refines the hypotheses of `estimate` against the line points of its frames,
+    /// re-weights them and sorts them heaviest first. Every hypothesis gets its [`LineEvidence`].
+    pub fn refine(&self, frames: &[FramePercepts], estimate: &mut BurstEstimate) {
+        let observations = observations(frames);
+        if observations.len() < MIN_POINTS {
+            let evidence = LineEvidence {
+                check: LineCheck::Unrefined,
+                points: observations.len(),
+                inlier_share: 0.0,
+                unseen_share: None,
+            };
+            for hypothesis in &mut estimate.hypotheses {
+                hypothesis.lines = Some(evidence);
+            }
+            return;
+        }
+        let originals: Vec<FusedHypothesis> = estimate.hypotheses.clone();
+        let mut refined: Vec<(FusedHypothesis, f64)> = Vec::with_capacity(originals.len());
+        for (index, hypothesis) in originals.iter().enumerate() {
+            // A point-symmetric twin of one already refined sees the same lines: mirror its result.
+            let twin = originals[..index].iter().position(|earlier| {
+                let image = Symmetry::PointReflection.apply(&earlier.pose);
+                image.distance_to(&hypothesis.pose) < 1e-6
+                    && angle_distance(image.heading(), hypothesis.pose.heading()) < 1e-6
+            });
+            refined.push(match twin {
+                Some(twin) => {
+                    let (twin_result, factor) = refined[twin];
+                    let pose = Symmetry::PointReflection.apply(&twin_result.pose);
+                    (FusedHypothesis { pose, weight: hypothesis.weight, ..twin_result }, factor)
+                }
+                None => self.refine_one(frames, &observations, hypothesis),
+            });
+        }
+        for (hypothesis, factor) in &mut refined {
+            hypothesis.weight *= *factor;
+        }
+        let total: f64 = refined.iter().map(|(hypothesis, _)| hypothesis.weight).sum();
+        estimate.hypotheses = refined
+            .into_iter()
+            .map(|(mut hypothesis, _)| {
+                hypothesis.weight /= total;
+                hypothesis
+            })
+            .collect();
+        estimate.hypotheses.sort_by(|a, b| b.weight.total_cmp(&a.weight));
+    }
+
+    /// Fits and checks one hypothesis; returns it refined (or as it was) and its weight factor.
+    fn refine_one(
+        &self,
+        frames: &[FramePercepts],
+        observations: &[Observation],
+        hypothesis: &FusedHypothesis,
+    ) -> (FusedHypothesis, f64) {
+        let prior = Prior {
+            pose: hypothesis.pose,
+            sigma: Vector3::new(
+                hypothesis.sigma.x.clamp(MIN_PRIOR_SIGMA.0, MAX_PRIOR_SIGMA.0),
+                hypothesis.sigma.y.clamp(MIN_PRIOR_SIGMA.0, MAX_PRIOR_SIGMA.0),
+                hypothesis.sigma.theta.clamp(MIN_PRIOR_SIGMA.1, MAX_PRIOR_SIGMA.1),
+            ),
+        };
+        let fitted = fit(&self.map, observations, &prior);
+        let inlier_share = self.inlier_share(observations, &fitted.pose);
+        let unseen_share = self.unseen_share(frames, &fitted.pose);
+        let quality = inlier_share * (1.0 - unseen_share.unwrap_or(0.0));
+        let points = observations.len();
+        if quality < CONTRADICTED_BELOW {
+            let evidence =
+                LineEvidence { check: LineCheck::Contradicted, points, inlier_share, unseen_share };
+            let factor = quality.max(0.01).powi(2) * CONTRADICTED_FACTOR;
+            return (FusedHypothesis { lines: Some(evidence), ..*hypothesis }, factor);
+        }
+        let line_sigma = fitted
+            .line_information
+            .try_inverse()
+            .map(|covariance| covariance.diagonal().map(f64::sqrt))
+            .filter(|sigma| sigma.iter().all(|s| s.is_finite()));
+        let fixed = line_sigma.is_some_and(|sigma| {
+            sigma.x <= REFINED_SIGMA.0 && sigma.y <= REFINED_SIGMA.0 && sigma.z <= REFINED_SIGMA.1
+        });
+        let check = if fixed { LineCheck::Refined } else { LineCheck::Partial };
+        let sigma = fitted.covariance.diagonal().map(|variance| variance.max(0.0).sqrt());
+        let refined = FusedHypothesis {
+            pose: fitted.pose,
+            weight: hypothesis.weight,
+            sigma: PoseSigma { x: sigma.x, y: sigma.y, theta: sigma.z },
+            lines: Some(LineEvidence { check, points, inlier_share, unseen_share }),
+        };
+        (refined, quality.powi(2))
+    }
+
+    /// Share of the points within `INLIER_SIGMAS` σ (or 5 cm) of a line under `pose`.
+    fn inlier_share(&self, observations: &[Observation], pose: &FieldPose) -> f64 {
+        let inliers = observations
+            .iter()
+            .filter(|observation| {
+                let distance = self.map.residual(pose.robot_to_field(observation.ground)).0;
+                distance <= (INLIER_SIGMAS * observation.sigma).max(0.05)
+            })
+            .count();
+        inliers as f64 / observations.len() as f64
+    }
+
+    /// Share of the model-line samples some frame should have seen under `pose` that no line point of
+    /// that frame lies near (in the image, within a scan spacing and a bit).
+    fn unseen_share(&self, frames: &[FramePercepts], pose: &FieldPose) -> Option<f64> {
+        let (mut expected, mut unseen) = (0usize, 0usize);
+        for frame in frames {
+            let tolerance = 1.5 * frame.scan_spacing() as f64 + 1.0;
+            for sample in &self.line_samples {
+                let ground = pose.field_to_robot(*sample);
+                let distance = ground.coords.norm();
+                if !(EXPECTED_RANGE.0..=EXPECTED_RANGE.1).contains(&distance) {
+                    continue;
+                }
+                let Some(pixel) = frame.camera().project(&Point3::new(ground.x, ground.y, 0.0)) else {
+                    continue;
+                };
+                if !frame.searched(&pixel) {
+                    continue;
+                }
+                expected += 1;
+                let seen = frame.points.iter().any(|point| (point.pixel - pixel).norm() <= tolerance);
+                unseen += usize::from(!seen);
+            }
+        }
+        (expected >= MIN_EXPECTED).then(|| unseen as f64 / expected as f64)
+    }
+}
+
+/// The line points of all frames as observations with their σ.
+fn observations(frames: &[FramePercepts]) -> Vec<Observation> {
+    frames
+        .iter()
+        .flat_map(|frame| {
+            let height = frame.camera_height();
+            frame.points.iter().filter_map(move |point| {
+                let distance = point.ground.coords.norm();
+                (distance <= MAX_POINT_DISTANCE).then(|| Observation {
+                    ground: point.ground,
+                    sigma: POINT_SIGMA + distance * distance / height * PITCH_SIGMA,
+                })
+            })
+        })
+        .collect()
+}

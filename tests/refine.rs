@@ -1,0 +1,224 @@
+//! Line refinement on rendered frames: percepts land on the true lines, perturbed poses come back,
+//! the lines down-weight what they contradict and tie point-symmetric twins, frames without lines stay
+//! unrefined, and bad inputs are clear errors.
+//!
+//! `RELOCD_REFINE_FRAMES=N cargo test --release --test refine -- --nocapture` runs the convergence
+//! check on N frames and prints the figures (BENCHMARKS.md, "Line refinement").
+
+use image::{Rgb, RgbImage};
+use relocd::frame::{Frame, YuyvImage};
+use relocd::geometry::{Camera, CameraIntrinsics, CameraPose, FieldModel, FieldPose, Symmetry};
+use relocd::refine::line_map::Primitive;
+use relocd::refine::{FramePercepts, LineCheck, LineRefiner, PerceptError};
+use relocd::relocaliser::{BurstEstimate, FusedHypothesis, PoseSigma};
+use relocd::sim::{Randomisation, SampledFrame, render};
+
+/// Seed of the frames rendered here: never used for training.
+const SEED: u64 = 7100;
+
+fn rendered(index: u64) -> (SampledFrame, Frame) {
+    let field = FieldModel::default();
+    let sampled = Randomisation::default().sample(&field, SEED, index, 2);
+    let camera = Camera::new(CameraIntrinsics::nao_top(), &sampled.pose, &sampled.camera);
+    let image = render(&sampled.scene, &camera, &sampled.settings);
+    (sampled, Frame::Rgb(image))
+}
+
+fn percepts(refiner: &LineRefiner, sampled: &SampledFrame, frame: &Frame) -> FramePercepts {
+    refiner.percepts(frame, &CameraIntrinsics::nao_top(), &sampled.camera).unwrap()
+}
+
+fn estimate(hypotheses: &[(FieldPose, f64)], sigma: PoseSigma) -> BurstEstimate {
+    BurstEstimate {
+        hypotheses: hypotheses
+            .iter()
+            .map(|&(pose, weight)| FusedHypothesis { pose, weight, sigma, lines: None })
+            .collect(),
+        frames: 1,
+        agreeing: 1,
+    }
+}
+
+/// The CNN-like spread the refinement starts from.
+fn cnn_sigma() -> PoseSigma {
+    PoseSigma { x: 0.35, y: 0.35, theta: 10f64.to_radians() }
+}
+
+/// Whether the frame's points (placed with the true pose) lie on two non-parallel lines (or on the
+/// circle and a line): the frames on which a full refinement is possible.
+fn sees_two_directions(refiner: &LineRefiner, percepts: &FramePercepts, truth: &FieldPose) -> bool {
+    let mut directions: Vec<Option<f64>> = Vec::new();
+    for primitive in refiner.map().primitives() {
+        let on_it = percepts
+            .points
+            .iter()
+            .filter(|p| {
+                let field = truth.robot_to_field(p.ground);
+                refiner.map().nearest(field) == primitive && primitive.residual(field).0 < 0.05
+            })
+            .count();
+        if on_it >= 5 {
+            directions.push(match primitive {
+                Primitive::Segment { start, end } => Some((end.y - start.y).atan2(end.x - start.x)),
+                Primitive::Circle { .. } => None,
+            });
+        }
+    }
+    directions.iter().enumerate().any(|(i, a)| {
+        directions[i + 1..].iter().any(|b| match (a, b) {
+            (Some(a), Some(b)) => (a - b).sin().abs() > 0.5,
+            _ => true,
+        })
+    })
+}
+
+#[test]
+fn percepts_land_on_the_true_lines() {
+    let field = FieldModel::default();
+    let refiner = LineRefiner::new(&field);
+    let mut distances = Vec::new();
+    for index in 0..12 {
+        let (sampled, frame) = rendered(index);
+        for point in percepts(&refiner, &sampled, &frame).points {
+            distances.push(field.distance_to_nearest_line(sampled.pose.robot_to_field(point.ground)));
+        }
+    }
+    assert!(distances.len() > 300, "only {} line points in 12 frames", distances.len());
+    distances.sort_by(f64::total_cmp);
+    let median = distances[distances.len() / 2];
+    let p95 = distances[distances.len() * 95 / 100];
+    assert!(median < 0.02 && p95 < 0.06, "median {median:.3} m, 95th percentile {p95:.3} m");
+}
+
+#[test]
+fn refinement_recovers_perturbed_poses() {
+    let frames: u64 = std::env::var("RELOCD_REFINE_FRAMES").ok().and_then(|n| n.parse().ok()).unwrap_or(40);
+    let refiner = LineRefiner::new(&FieldModel::default());
+    let (mut eligible, mut recovered) = (0usize, 0usize);
+    for index in 0..frames {
+        let (sampled, frame) = rendered(index);
+        let percepts = percepts(&refiner, &sampled, &frame);
+        if !sees_two_directions(&refiner, &percepts, &sampled.pose) {
+            continue;
+        }
+        eligible += 1;
+        // Perturbed by up to 50 cm and 15°, in a direction that depends on the frame.
+        let angle = index as f64 * 2.399;
+        let truth = sampled.pose;
+        let start = FieldPose::new(
+            truth.x() + 0.5 * angle.cos() * (0.4 + 0.6 * ((index % 5) as f64 / 4.0)),
+            truth.y() + 0.5 * angle.sin() * (0.4 + 0.6 * ((index % 5) as f64 / 4.0)),
+            truth.heading() + 15f64.to_radians() * (index as f64 * 0.7).sin(),
+        )
+        .unwrap();
+        let mut estimate = estimate(&[(start, 1.0)], cnn_sigma());
+        refiner.refine(std::slice::from_ref(&percepts), &mut estimate);
+        let result = &estimate.hypotheses[0];
+        let heading_error = (result.pose.heading() - truth.heading()).sin().abs().asin().to_degrees();
+        if result.pose.distance_to(&truth) <= 0.05 && heading_error <= 1.0 {
+            recovered += 1;
+        } else {
+            eprintln!("frame {index}: {:?} from {start:?}, truth {truth:?}, {:?}", result.pose, result.lines);
+        }
+    }
+    let share = recovered as f64 / eligible as f64;
+    eprintln!(
+        "{recovered} of {eligible} frames seeing two line directions recovered ({share:.3}); {frames} rendered"
+    );
+    assert!(eligible >= frames as usize / 3, "only {eligible} of {frames} frames see two line directions");
+    assert!(share >= 0.95, "{recovered} of {eligible} recovered");
+}
+
+#[test]
+fn lines_down_weight_a_contradicted_hypothesis_and_tie_point_twins() {
+    let refiner = LineRefiner::new(&FieldModel::default());
+    // Find a frame with plenty of lines.
+    let (sampled, frame, percepts) = (0..40)
+        .map(rendered)
+        .map(|(sampled, frame)| {
+            let percepts = percepts(&refiner, &sampled, &frame);
+            (sampled, frame, percepts)
+        })
+        .find(|(sampled, _, percepts)| {
+            percepts.points.len() > 100 && sees_two_directions(&refiner, percepts, &sampled.pose)
+        })
+        .expect("a frame with lines");
+    drop(frame);
+    let truth = sampled.pose;
+    let twin = Symmetry::PointReflection.apply(&truth);
+    // A wrong hypothesis: the mirror image, which sees the lines mirrored.
+    let wrong = Symmetry::MirrorLongAxis.apply(&truth);
+    let mut estimate = estimate(&[(truth, 0.3), (twin, 0.2), (wrong, 0.5)], cnn_sigma());
+    refiner.refine(std::slice::from_ref(&percepts), &mut estimate);
+    let find = |pose: &FieldPose| {
+        estimate.hypotheses.iter().find(|h| h.pose.distance_to(pose) < 0.2).expect("hypothesis kept")
+    };
+    let (kept, kept_twin, contradicted) = (find(&truth), find(&twin), find(&wrong));
+    assert_eq!(contradicted.lines.unwrap().check, LineCheck::Contradicted, "{:?}", contradicted.lines);
+    assert!(contradicted.weight < 0.1 * kept.weight, "{} vs {}", contradicted.weight, kept.weight);
+    assert_eq!(kept.lines.unwrap().check, LineCheck::Refined);
+    // The twins keep the ratio of their network weights: the lines score them the same.
+    assert_eq!(kept.lines, kept_twin.lines);
+    assert!((kept.weight / kept_twin.weight - 1.5).abs() < 1e-9, "{} / {}", kept.weight, kept_twin.weight);
+    assert!(Symmetry::PointReflection.apply(&kept.pose).distance_to(&kept_twin.pose) < 1e-9);
+    let total: f64 = estimate.hypotheses.iter().map(|h| h.weight).sum();
+    assert!((total - 1.0).abs() < 1e-9);
+}
+
+#[test]
+fn frames_without_lines_stay_unrefined() {
+    let refiner = LineRefiner::new(&FieldModel::default());
+    let camera = CameraPose::new(0.5, 0.2, 0.0, 0.0).unwrap();
+    let carpet = Frame::Rgb(RgbImage::from_pixel(640, 480, Rgb([60, 130, 50])));
+    let black = Frame::Rgb(RgbImage::from_pixel(640, 480, Rgb([3, 3, 3])));
+    let noise = Frame::Rgb(RgbImage::from_fn(640, 480, |x, y| {
+        let value = ((x * 7919 + y * 104_729) % 251) as u8;
+        Rgb([value, value.wrapping_mul(3), value.wrapping_mul(7)])
+    }));
+    let pose = FieldPose::new(-1.0, 1.0, 0.5).unwrap();
+    for frame in [carpet, black, noise] {
+        let percepts = refiner.percepts(&frame, &CameraIntrinsics::nao_top(), &camera).unwrap();
+        let mut estimate = estimate(&[(pose, 1.0)], cnn_sigma());
+        refiner.refine(std::slice::from_ref(&percepts), &mut estimate);
+        let only = &estimate.hypotheses[0];
+        assert_eq!(only.lines.unwrap().check, LineCheck::Unrefined);
+        assert_eq!((only.pose, only.sigma), (pose, cnn_sigma()), "the network's hypothesis as it was");
+    }
+}
+
+#[test]
+fn bad_inputs_are_clear_errors() {
+    let refiner = LineRefiner::new(&FieldModel::default());
+    let camera = CameraPose::new(0.5, 0.2, 0.0, 0.0).unwrap();
+    let empty = Frame::Rgb(RgbImage::new(0, 0));
+    assert_eq!(
+        refiner.percepts(&empty, &CameraIntrinsics::nao_top(), &camera).unwrap_err(),
+        PerceptError::EmptyFrame { width: 0, height: 0 }
+    );
+    let frame = Frame::Rgb(RgbImage::new(64, 48));
+    let blind = CameraIntrinsics { horizontal_fov: f64::NAN, ..CameraIntrinsics::nao_top() };
+    let error = refiner.percepts(&frame, &blind, &camera).unwrap_err().to_string();
+    assert!(error.contains("not a usable pinhole"), "{error}");
+    let nan = CameraPose::new(0.5, f64::NAN, 0.0, 0.0).unwrap_err().to_string();
+    assert!(nan.contains("pitch"), "{nan}");
+    let impossible = CameraPose::new(0.5, 2.0, 0.0, 0.0).unwrap_err().to_string();
+    assert!(impossible.contains("pitch"), "{impossible}");
+}
+
+#[test]
+fn yuyv_frames_give_the_same_line_points_as_rgb() {
+    let refiner = LineRefiner::new(&FieldModel::default());
+    let (sampled, frame) = rendered(3);
+    let Frame::Rgb(image) = &frame else { unreachable!("rendered frames are RGB") };
+    let yuyv = Frame::Yuyv(YuyvImage::from_rgb(image).unwrap());
+    let (from_rgb, from_yuyv) = (percepts(&refiner, &sampled, &frame), percepts(&refiner, &sampled, &yuyv));
+    assert!(from_rgb.points.len() > 50, "{}", from_rgb.points.len());
+    let ratio = from_yuyv.points.len() as f64 / from_rgb.points.len() as f64;
+    assert!((0.9..=1.1).contains(&ratio), "{} vs {}", from_yuyv.points.len(), from_rgb.points.len());
+    for point in &from_yuyv.points {
+        assert!(point.ground.x > 0.0, "behind the camera: {point:?}");
+        let nearest =
+            from_rgb.points.iter().map(|p| (p.ground - point.ground).norm()).fold(f64::INFINITY, f64::min);
+        assert!(nearest < 0.1, "{point:?} has no RGB counterpart");
+    }
+}
