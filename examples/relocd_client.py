@@ -46,13 +46,15 @@ class RelocdError(Exception):
 
 @dataclass
 class Hypothesis:
-    """One weighted full-field robot pose: metres, radians, sigma = (sx, sy, stheta)."""
+    """One weighted full-field robot pose: metres, radians, sigma = (sx, sy, stheta); `lines` says what
+    the field lines made of it ("refined", "partial", "unrefined", "contradicted"; None when off)."""
 
     x: float
     y: float
     theta: float
     weight: float
     sigma: Tuple[float, float, float]
+    lines: Optional[str] = None
 
 
 @dataclass
@@ -91,7 +93,7 @@ def decode(data: bytes) -> Message:
     try:
         hypotheses = [
             Hypothesis(float(h["x"]), float(h["y"]), float(h["theta"]), float(h["weight"]),
-                       tuple(float(s) for s in h["sigma"]))
+                       tuple(float(s) for s in h["sigma"]), (h.get("lines") or {}).get("check"))
             for h in raw["hypotheses"]
         ]
         message = Message(int(raw["seq"]), list(raw["triggers"]), hypotheses, raw.get("failure"), raw)

@@ -159,6 +159,10 @@ struct RunArgs {
     /// Head yaw assumed when the trigger and frame give none, degrees.
     #[arg(long, allow_negative_numbers = true)]
     head_yaw: Option<f64>,
+    /// Publish the network's hypotheses without checking them against the field lines (config
+    /// `refine = false`).
+    #[arg(long)]
+    no_refine: bool,
 }
 
 #[derive(Debug, clap::Args)]
@@ -366,6 +370,7 @@ fn run(args: RunArgs, log_level: Option<String>) -> anyhow::Result<()> {
     config.publish.encoding = args.encoding.unwrap_or(config.publish.encoding);
     config.burst.frames = args.burst.unwrap_or(config.burst.frames);
     config.camera.head_yaw_deg = args.head_yaw.unwrap_or(config.camera.head_yaw_deg);
+    config.refine &= !args.no_refine;
     config.log_level = log_level.unwrap_or(config.log_level);
     if !args.publish.is_empty() {
         config.publish.targets = args.publish;

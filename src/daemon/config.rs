@@ -9,7 +9,7 @@ use std::str::FromStr;
 use serde::Deserialize;
 use thiserror::Error;
 
-use crate::geometry::Representation;
+use crate::geometry::{CameraPose, PoseError, Representation};
 use crate::protocol::message::Encoding;
 use crate::relocaliser::{Backend, LoadOptions};
 
@@ -82,6 +82,8 @@ pub struct Config {
     pub process: ProcessConfig,
     /// Longer GameController, sensor and control datagrams are dropped unread (and counted).
     pub max_datagram_bytes: usize,
+    /// Verify and refine the hypotheses against the field lines in the burst's frames.
+    pub refine: bool,
 }
 
 impl Default for Config {
@@ -105,6 +107,7 @@ impl Default for Config {
             sim: SimConfig::default(),
             process: ProcessConfig::default(),
             max_datagram_bytes: 16_384,
+            refine: true,
         }
     }
 }
@@ -177,6 +180,9 @@ impl Config {
         }
         if !self.camera.head_yaw_deg.is_finite() || self.camera.head_yaw_deg.abs() > 120.0 {
             return invalid("camera.head_yaw_deg", "must lie within ±120° (the Nao's head yaw range)");
+        }
+        if let Err(error) = self.camera.assumed_pose(0.0) {
+            return invalid("camera.height_m/pitch_deg/roll_deg", &error.to_string());
         }
         if !(8..=1280).contains(&self.sim.width) {
             return invalid("sim.width", "must lie in 8..=1280");
@@ -286,11 +292,35 @@ pub struct CameraConfig {
     pub keep_streaming: bool,
     /// Head yaw assumed when neither the trigger nor the frame gives one, degrees (positive: left).
     pub head_yaw_deg: f64,
+    /// Camera height above the ground assumed when the frame does not carry its camera pose, metres
+    /// (line refinement projects with it).
+    pub height_m: f64,
+    /// Camera pitch assumed likewise, degrees (positive looks down; a standing Nao's top camera: 1.2°).
+    pub pitch_deg: f64,
+    /// Camera roll assumed likewise, degrees.
+    pub roll_deg: f64,
+}
+
+impl CameraConfig {
+    /// The camera pose on the robot assumed when a frame does not carry one, with `head_yaw` radians.
+    pub fn assumed_pose(&self, head_yaw: f64) -> Result<CameraPose, PoseError> {
+        CameraPose::new(self.height_m, self.pitch_deg.to_radians(), self.roll_deg.to_radians(), head_yaw)
+    }
 }
 
 impl Default for CameraConfig {
     fn default() -> Self {
-        Self { width: 640, height: 480, fps: 30, keep_streaming: false, head_yaw_deg: 0.0 }
+        let standing = CameraPose::STANDING;
+        Self {
+            width: 640,
+            height: 480,
+            fps: 30,
+            keep_streaming: false,
+            head_yaw_deg: 0.0,
+            height_m: standing.height(),
+            pitch_deg: standing.pitch().to_degrees(),
+            roll_deg: standing.roll().to_degrees(),
+        }
     }
 }
 

@@ -32,6 +32,7 @@ use crate::geometry::FieldModel;
 use crate::posture::{PostureConfig, PostureDetector};
 use crate::protocol::gamecontroller::PenaltyWatch;
 use crate::recording::Recording;
+use crate::refine::LineRefiner;
 use crate::relocaliser::{self, Backend, Model, Relocaliser};
 
 /// Triggers waiting for the relocalisation thread on their own; more join a waiting one of their kind.
@@ -78,12 +79,14 @@ pub fn run(config: Config) -> anyhow::Result<()> {
     drop(triggers);
     let replacement = Arc::new(ModelSlot::default());
 
+    let refiner = config.refine.then(|| LineRefiner::new(&FieldModel::new(model.contract().field.clone())));
     let worker = Worker {
         relocaliser: Relocaliser::new(model),
         source,
         publisher,
         burst: config.burst.clone(),
-        default_head_yaw: config.camera.head_yaw_deg.to_radians(),
+        camera: config.camera.clone(),
+        refiner,
         steadiness,
         status: status.clone(),
         stop: stop.clone(),

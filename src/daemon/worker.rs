@@ -8,16 +8,17 @@ use std::time::{Duration, Instant};
 
 use tracing::{info, warn};
 
-use super::config::BurstConfig;
+use super::config::{BurstConfig, CameraConfig};
 use super::publish::Publisher;
 use super::queue::TriggerQueue;
 use super::source::{CaptureRequest, FrameSource, sleep_unless_stopped, unix_now};
 use super::status::Status;
 use super::triggers::{Steadiness, TriggerEvent};
-use crate::geometry::FieldPose;
+use crate::geometry::{CameraIntrinsics, FieldPose};
 use crate::protocol::message::{
     FrameCounts, Hypothesis, Latency, Message, ModelInfo, SCHEMA_VERSION, Trigger, TriggerKind,
 };
+use crate::refine::{FramePercepts, LineRefiner};
 use crate::relocaliser::{Model, PlacementPrior, Prediction, Relocaliser, fuse};
 
 /// How often the settle wait looks at the sensors.
@@ -33,8 +34,10 @@ pub struct Worker {
     pub publisher: Publisher,
     /// Burst size and timing.
     pub burst: BurstConfig,
-    /// Head yaw when neither frame nor trigger gives one, radians.
-    pub default_head_yaw: f64,
+    /// The camera pose (and head yaw) assumed when neither frame nor trigger gives one.
+    pub camera: CameraConfig,
+    /// Verifies and refines hypotheses against the field lines; `None` when refinement is off.
+    pub refiner: Option<LineRefiner>,
     /// Whether the robot stands still, from the sensor task.
     pub steadiness: Arc<Steadiness>,
     /// Counters.
@@ -67,6 +70,7 @@ struct BurstTimes {
     preprocess_ms: f64,
     inference_ms: f64,
     fusion_ms: f64,
+    refine_ms: f64,
 }
 
 impl Worker {
@@ -127,8 +131,11 @@ impl Worker {
     /// One burst for `batch`, as a message.
     fn relocalise(&mut self, seq: u64, batch: &[TriggerEvent]) -> Message {
         let contract = self.relocaliser.model().contract();
-        let head_yaw =
-            batch.iter().rev().find_map(|trigger| trigger.head_yaw).unwrap_or(self.default_head_yaw);
+        let head_yaw = batch
+            .iter()
+            .rev()
+            .find_map(|trigger| trigger.head_yaw)
+            .unwrap_or(self.camera.head_yaw_deg.to_radians());
         let penalty_return = batch.iter().any(|trigger| trigger.kind == TriggerKind::PenaltyReturn);
         let mut message = Message {
             schema: SCHEMA_VERSION,
@@ -158,6 +165,7 @@ impl Worker {
             preprocess_ms: 0.0,
             inference_ms: 0.0,
             fusion_ms: 0.0,
+            refine_ms: 0.0,
         };
         match self.estimate(head_yaw, penalty_return, &mut times, &mut message) {
             Ok(()) => {}
@@ -174,6 +182,7 @@ impl Worker {
             preprocess: times.preprocess_ms,
             inference: times.inference_ms,
             fusion: times.fusion_ms,
+            refine: times.refine_ms,
             total: ms(first_at.elapsed()),
         };
         message.published = unix_now();
@@ -196,14 +205,28 @@ impl Worker {
         };
         // Each frame is relocalised as it arrives, while the source waits for the next one.
         let mut predictions: Vec<Prediction> = Vec::with_capacity(request.count);
+        let mut percepts: Vec<FramePercepts> = Vec::new();
         let mut errors = Vec::new();
         let mut first_taken = None;
         let mut truth = None;
-        let relocaliser = &self.relocaliser;
+        let (relocaliser, refiner, assumed_camera) = (&self.relocaliser, &self.refiner, &self.camera);
         let captured = self.source.capture(&request, &mut |captured| {
             first_taken.get_or_insert(captured.taken);
             truth = truth.or(captured.truth);
             let yaw = captured.camera.map_or(head_yaw, |camera| camera.head_yaw());
+            if let Some(refiner) = refiner {
+                let lines = Instant::now();
+                let camera = captured.camera.map_or_else(|| assumed_camera.assumed_pose(yaw), Ok);
+                match camera.map_err(|e| e.to_string()).and_then(|camera| {
+                    refiner
+                        .percepts(&captured.frame, &CameraIntrinsics::nao_top(), &camera)
+                        .map_err(|e| e.to_string())
+                }) {
+                    Ok(found) => percepts.push(found),
+                    Err(error) => warn!("frame not used for line refinement: {error}"),
+                }
+                times.refine_ms += lines.elapsed().as_secs_f64() * 1e3;
+            }
             match relocaliser.relocalise(&captured.frame, yaw) {
                 Ok(result) => {
                     times.preprocess_ms += result.timings.preprocess_ms;
@@ -226,11 +249,16 @@ impl Worker {
             Some(frame_error) => format!("no frame could be relocalised: {frame_error}"),
             None => error.to_string(),
         })?;
+        times.fusion_ms += fusing.elapsed().as_secs_f64() * 1e3;
+        if let Some(refiner) = &self.refiner {
+            let refining = Instant::now();
+            refiner.refine(&percepts, &mut estimate);
+            times.refine_ms += refining.elapsed().as_secs_f64() * 1e3;
+        }
         if penalty_return {
             PlacementPrior::penalty_return().apply(&mut estimate.hypotheses);
             message.prior = Some("penalty_return".into());
         }
-        times.fusion_ms += fusing.elapsed().as_secs_f64() * 1e3;
         message.frames.used = estimate.frames as u32;
         message.frames.agreeing = estimate.agreeing as u32;
         message.hypotheses = estimate
@@ -242,6 +270,7 @@ impl Worker {
                 theta: h.pose.heading(),
                 weight: h.weight,
                 sigma: [h.sigma.x, h.sigma.y, h.sigma.theta],
+                lines: h.lines,
             })
             .collect();
         log_result(message, truth);

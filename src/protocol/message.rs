@@ -5,6 +5,7 @@ use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
 use crate::geometry::Representation;
+use crate::refine::LineEvidence;
 
 /// The schema version this relocd writes. A change that breaks readers bumps it; new optional keys do
 /// not.
@@ -111,6 +112,9 @@ pub struct Latency {
     pub inference: f64,
     /// Decoding, fusion and the prior.
     pub fusion: f64,
+    /// Line percepts (summed over the burst) and line refinement; 0 when refinement is off.
+    #[serde(default)]
+    pub refine: f64,
     /// From the first trigger to publishing.
     pub total: f64,
 }
@@ -128,6 +132,10 @@ pub struct Hypothesis {
     pub weight: f64,
     /// Standard deviations of x, y (metres) and theta (radians).
     pub sigma: [f64; 3],
+    /// What the field lines said about this hypothesis, when refinement is on. Point-symmetric twins
+    /// always carry the same evidence: lines cannot tell them apart.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lines: Option<LineEvidence>,
 }
 
 /// The message published once per relocalisation (or failure).
@@ -214,6 +222,7 @@ impl Message {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::refine::LineCheck;
 
     fn example() -> Message {
         Message {
@@ -235,8 +244,27 @@ mod tests {
             prior: Some("penalty_return".into()),
             latency_ms: Latency { total: 750.0, ..Latency::default() },
             hypotheses: vec![
-                Hypothesis { x: -3.1, y: 3.4, theta: -1.5, weight: 0.97, sigma: [0.2, 0.2, 0.1] },
-                Hypothesis { x: 3.1, y: -3.4, theta: 1.64, weight: 0.03, sigma: [0.2, 0.2, 0.1] },
+                Hypothesis {
+                    x: -3.1,
+                    y: 3.4,
+                    theta: -1.5,
+                    weight: 0.97,
+                    sigma: [0.02, 0.02, 0.01],
+                    lines: Some(LineEvidence {
+                        check: LineCheck::Refined,
+                        points: 140,
+                        inlier_share: 0.98,
+                        unseen_share: Some(0.05),
+                    }),
+                },
+                Hypothesis {
+                    x: 3.1,
+                    y: -3.4,
+                    theta: 1.64,
+                    weight: 0.03,
+                    sigma: [0.2, 0.2, 0.1],
+                    lines: None,
+                },
             ],
             failure: None,
         }
@@ -251,7 +279,9 @@ mod tests {
         let json: serde_json::Value = serde_json::from_slice(&message.encode(Encoding::Json)).unwrap();
         assert_eq!(json["triggers"][0]["kind"], "penalty_return");
         assert_eq!(json["model"]["representation"], "half-point");
-        assert_eq!(json["hypotheses"][0]["sigma"][2], 0.1);
+        assert_eq!(json["hypotheses"][0]["sigma"][2], 0.01);
+        assert_eq!(json["hypotheses"][0]["lines"]["check"], "refined");
+        assert!(json["hypotheses"][1].get("lines").is_none(), "no key when refinement is off");
     }
 
     #[test]

@@ -13,7 +13,7 @@ pub mod optimise;
 pub mod percepts;
 
 use nalgebra::{Point2, Point3, Vector3};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 pub use line_map::LineMap;
 pub use percepts::{FramePercepts, LinePoint, PerceptError, detect};
@@ -52,7 +52,7 @@ const MIN_PRIOR_SIGMA: (f64, f64) = (0.15, 0.09);
 const MAX_PRIOR_SIGMA: (f64, f64) = (0.6, 0.35);
 
 /// What the lines made of one hypothesis.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum LineCheck {
     /// The lines fix x, y and heading: the pose and σ are the fit's.
@@ -67,7 +67,7 @@ pub enum LineCheck {
 }
 
 /// The lines' evidence about one hypothesis.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct LineEvidence {
     /// What was done with it.
     pub check: LineCheck,

@@ -60,7 +60,21 @@ fn the_rust_client_asks_for_a_relocalisation_and_receives_its_answer() {
     assert_eq!(message.hypotheses.len(), 2, "a half-point model's symmetric pair");
     let total: f64 = message.hypotheses.iter().map(|h| h.weight).sum();
     assert!((total - 1.0).abs() < 1e-6, "{:?}", message.hypotheses);
+    // Refinement is on by default: both twins carry the same line evidence.
+    let evidence: Vec<_> = message.hypotheses.iter().map(|h| h.lines.expect("line evidence")).collect();
+    assert_eq!(evidence[0], evidence[1], "the lines cannot tell point-symmetric twins apart");
+    assert!(evidence[0].points > 0, "{evidence:?}");
     assert_eq!(control.status().unwrap()["published"], 1);
+    daemon.stop();
+}
+
+#[test]
+fn without_refinement_the_message_carries_no_line_evidence() {
+    let daemon = Daemon::start("replay:{sample}", &["--burst", "1", "--no-refine"]);
+    daemon.control(br#"{"relocalise": {"reason": "unrefined"}}"#);
+    let message = daemon.message();
+    assert!(message.hypotheses.iter().all(|h| h.lines.is_none()), "{:?}", message.hypotheses);
+    assert_eq!(message.latency_ms.refine, 0.0);
     daemon.stop();
 }
 
