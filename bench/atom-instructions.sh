@@ -37,9 +37,9 @@ count() {
 
 printf '%-44s %-10s %16s %14s\n' model stage "instructions" "Atom est. ms"
 for model in "${models[@]}"; do
-    for stage in preprocess inference unfold fusion total; do
+    for stage in preprocess inference unfold fusion lines refine total; do
         runs=10
-        case "$stage" in unfold | fusion) runs=1000 ;; esac
+        case "$stage" in unfold | fusion) runs=1000 ;; lines | refine) runs=100 ;; esac
         one=$(count "$model" "$stage" 1)
         more=$(count "$model" "$stage" $((runs + 1)))
         per_run=$(( (more - one) / runs ))

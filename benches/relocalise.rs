@@ -1,21 +1,25 @@
 //! Per-stage latency of one relocalisation on the calling thread: YUYV 640×480 → input tensor,
 //! inference of the built-in int8 model and of every committed model in `models/`, decoding and
-//! unfolding, fusing a burst of five frames, and the whole pipeline. `relocd bench` times the same
+//! unfolding, fusing a burst of five frames, line points and refining one hypothesis against them,
+//! and the whole pipeline. `relocd bench` times the same
 //! stages in the shipped binary.
 
 use std::path::Path;
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use relocd::frame::{Frame, YuyvImage};
-use relocd::geometry::{Camera, CameraIntrinsics, FieldModel};
+use relocd::geometry::{Camera, CameraIntrinsics, CameraPose, FieldModel};
+use relocd::refine::LineRefiner;
 use relocd::relocaliser::{Model, Prediction, Relocaliser, default_model, fuse, preprocess};
 use relocd::sim::{Randomisation, render};
 
-fn camera_frame() -> Frame {
+fn camera_frame() -> (Frame, CameraPose) {
     let field = FieldModel::default();
     let sampled = Randomisation::default().sample(&field, 4000, 0, 1);
     let camera = Camera::new(CameraIntrinsics::nao_top(), &sampled.pose, &sampled.camera);
-    Frame::Yuyv(YuyvImage::from_rgb(&render(&sampled.scene, &camera, &sampled.settings)).unwrap())
+    let frame =
+        Frame::Yuyv(YuyvImage::from_rgb(&render(&sampled.scene, &camera, &sampled.settings)).unwrap());
+    (frame, sampled.camera)
 }
 
 /// Every ONNX model in `models/`, by file name.
@@ -37,7 +41,7 @@ fn committed_models() -> Vec<(String, Model)> {
 }
 
 fn stages(criterion: &mut Criterion) {
-    let frame = camera_frame();
+    let (frame, camera_pose) = camera_frame();
     let model = default_model().unwrap();
     let input = preprocess(&frame, &model.contract().input).unwrap();
     let raw = model.run(&input).unwrap();
@@ -62,6 +66,17 @@ fn stages(criterion: &mut Criterion) {
     let prediction = Prediction::decode(&raw, representation, 0.0).unwrap();
     let burst = vec![prediction; 5];
     group.bench_function("fuse_burst_of_5", |b| b.iter(|| fuse(&burst)));
+    let refiner = LineRefiner::new(&FieldModel::default());
+    let intrinsics = CameraIntrinsics::nao_top();
+    group.bench_function("line_points_yuyv_640x480", |b| {
+        b.iter(|| refiner.percepts(&frame, &intrinsics, &camera_pose))
+    });
+    let percepts = refiner.percepts(&frame, &intrinsics, &camera_pose).unwrap();
+    let mut one = fuse(&burst[..1]).unwrap();
+    one.hypotheses.truncate(1);
+    group.bench_function("refine_one_hypothesis", |b| {
+        b.iter(|| refiner.refine(std::slice::from_ref(&percepts), &mut one.clone()))
+    });
     let relocaliser = Relocaliser::new(model);
     group.bench_function("whole_frame", |b| b.iter(|| relocaliser.relocalise(&frame, 0.0)));
     group.finish();

@@ -10,7 +10,8 @@ use anyhow::Context;
 use serde::Serialize;
 
 use crate::frame::{Frame, YuyvImage};
-use crate::geometry::{Camera, CameraIntrinsics, FieldModel};
+use crate::geometry::{Camera, CameraIntrinsics, CameraPose, FieldModel};
+use crate::refine::LineRefiner;
 use crate::relocaliser::{Backend, Model, Prediction, Relocaliser, fuse, kernel_isa, preprocess};
 use crate::sim::{Randomisation, render};
 
@@ -30,14 +31,25 @@ pub enum Stage {
     Unfold,
     /// Fusing a burst of five predictions.
     Fusion,
+    /// Line points of one frame.
+    Lines,
+    /// Refining one hypothesis against those line points (search, fit and verification).
+    Refine,
     /// A whole frame: preprocess, inference, unfold.
     Total,
 }
 
 impl Stage {
     /// Every stage, in pipeline order.
-    pub const ALL: [Stage; 5] =
-        [Stage::Preprocess, Stage::Inference, Stage::Unfold, Stage::Fusion, Stage::Total];
+    pub const ALL: [Stage; 7] = [
+        Stage::Preprocess,
+        Stage::Inference,
+        Stage::Unfold,
+        Stage::Fusion,
+        Stage::Lines,
+        Stage::Refine,
+        Stage::Total,
+    ];
 
     fn name(self) -> &'static str {
         match self {
@@ -45,6 +57,8 @@ impl Stage {
             Stage::Inference => "inference",
             Stage::Unfold => "unfold",
             Stage::Fusion => "fusion",
+            Stage::Lines => "lines",
+            Stage::Refine => "refine",
             Stage::Total => "total",
         }
     }
@@ -61,7 +75,7 @@ impl FromStr for Stage {
 
     fn from_str(name: &str) -> Result<Self, Self::Err> {
         Stage::ALL.into_iter().find(|stage| stage.name() == name).ok_or_else(|| {
-            format!("unknown stage {name:?}: expected preprocess, inference, unfold, fusion or total")
+            format!("unknown stage {name:?}: expected preprocess, inference, unfold, fusion, lines, refine or total")
         })
     }
 }
@@ -81,6 +95,12 @@ pub struct StageMedians {
     /// Fusing a burst of five.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub fusion_ms: Option<f64>,
+    /// Line points of one frame.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lines_ms: Option<f64>,
+    /// Refining one hypothesis against them.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub refine_ms: Option<f64>,
     /// A whole frame.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub total_ms: Option<f64>,
@@ -105,8 +125,9 @@ pub struct BenchReport {
     pub stages: StageMedians,
 }
 
-/// Times `stages` of relocalising `frame` (default: a rendered 640×480 YUYV top-camera frame) with
-/// `model`, `iterations` times each (after a short warm-up); medians in milliseconds.
+/// Times `stages` of relocalising `frame` (default: a rendered 640×480 YUYV top-camera frame, with its
+/// camera pose; a given frame is taken as seen by a standing robot) with `model`, `iterations` times
+/// each (after a short warm-up); medians in milliseconds.
 pub fn run(
     model: Model,
     model_name: String,
@@ -114,13 +135,21 @@ pub fn run(
     stages: &[Stage],
     iterations: usize,
 ) -> anyhow::Result<BenchReport> {
-    let frame = frame.unwrap_or_else(camera_frame);
+    let (frame, camera_pose) = match frame {
+        Some(frame) => (frame, CameraPose::STANDING),
+        None => camera_frame(),
+    };
     let spec = model.contract().input.clone();
     let input = preprocess(&frame, &spec).context("the benchmark frame does not fit the model")?;
     let raw = model.run(&input)?;
     let representation = model.contract().representation;
     let prediction = Prediction::decode(&raw, representation, 0.0)?;
-    let burst = vec![prediction; BURST];
+    let burst = vec![prediction.clone(); BURST];
+    let refiner = LineRefiner::new(&FieldModel::new(model.contract().field.clone()));
+    let intrinsics = CameraIntrinsics::nao_top();
+    let percepts = refiner.percepts(&frame, &intrinsics, &camera_pose)?;
+    let mut heaviest = fuse(std::slice::from_ref(&prediction))?;
+    heaviest.hypotheses.truncate(1);
     let backend = model.backend();
     let relocaliser = Relocaliser::new(model);
 
@@ -133,6 +162,12 @@ pub fn run(
                 drop(Prediction::decode(&raw, representation, 0.0).map(|prediction| prediction.hypotheses()))
             }),
             Stage::Fusion => median_ms(iterations, || drop(fuse(&burst))),
+            Stage::Lines => {
+                median_ms(iterations, || drop(refiner.percepts(&frame, &intrinsics, &camera_pose)))
+            }
+            Stage::Refine => median_ms(iterations, || {
+                refiner.refine(std::slice::from_ref(&percepts), &mut heaviest.clone())
+            }),
             Stage::Total => median_ms(iterations, || drop(relocaliser.relocalise(&frame, 0.0))),
         };
         let slot = match stage {
@@ -140,6 +175,8 @@ pub fn run(
             Stage::Inference => &mut medians.inference_ms,
             Stage::Unfold => &mut medians.unfold_ms,
             Stage::Fusion => &mut medians.fusion_ms,
+            Stage::Lines => &mut medians.lines_ms,
+            Stage::Refine => &mut medians.refine_ms,
             Stage::Total => &mut medians.total_ms,
         };
         *slot = Some(median);
@@ -157,13 +194,14 @@ pub fn run(
     })
 }
 
-/// A rendered top-camera frame (the criterion benchmark's frame: seed 4000, frame 0).
-fn camera_frame() -> Frame {
+/// A rendered top-camera frame and its camera pose (the criterion benchmark's frame: seed 4000,
+/// frame 0; it shows a penalty-area corner and the goal line).
+fn camera_frame() -> (Frame, CameraPose) {
     let field = FieldModel::default();
     let sampled = Randomisation::default().sample(&field, 4000, 0, 1);
     let camera = Camera::new(CameraIntrinsics::nao_top(), &sampled.pose, &sampled.camera);
     let rgb = render(&sampled.scene, &camera, &sampled.settings);
-    Frame::Yuyv(YuyvImage::from_rgb(&rgb).expect("the Nao's frame width is even"))
+    (Frame::Yuyv(YuyvImage::from_rgb(&rgb).expect("the Nao's frame width is even")), sampled.camera)
 }
 
 /// The median of `iterations` timed runs of `work`, milliseconds.
@@ -208,11 +246,13 @@ impl fmt::Display for BenchReport {
             ("inference", self.stages.inference_ms),
             ("unfold", self.stages.unfold_ms),
             ("fusion (burst of 5)", self.stages.fusion_ms),
+            ("lines (one frame)", self.stages.lines_ms),
+            ("refine (one hypothesis)", self.stages.refine_ms),
             ("total (one frame)", self.stages.total_ms),
         ];
         for (name, median) in stages {
             if let Some(median) = median {
-                writeln!(formatter, "{name:<20} {median:>10.4} ms")?;
+                writeln!(formatter, "{name:<24} {median:>10.4} ms")?;
             }
         }
         Ok(())
