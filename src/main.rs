@@ -185,6 +185,10 @@ struct RenderArgs {
     /// What lies beyond the carpet.
     #[arg(long, value_enum, default_value_t = SurroundingsArg::Black)]
     surroundings: SurroundingsArg,
+    /// Add what real halls show: shadows, a textured and worn carpet, motion blur, exposure and
+    /// white-balance errors, robots at the border and the cluttered hall (implies asymmetric).
+    #[arg(long)]
+    hall_realism: bool,
     /// Frame file format.
     #[arg(long, value_enum, default_value_t = FormatArg::Png)]
     format: FormatArg,
@@ -498,6 +502,7 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
             camera_roll: -args.max_camera_roll.to_radians()..=args.max_camera_roll.to_radians(),
             asymmetric_surroundings: matches!(args.surroundings, SurroundingsArg::Asymmetric),
             penalty_return: matches!(args.poses, PosesArg::PenaltyReturn),
+            hall_realism: args.hall_realism,
             ..Randomisation::default()
         },
         supersample: args.supersample,

@@ -7,7 +7,7 @@ use relocd::geometry::{Camera, CameraIntrinsics, CameraPose, FieldModel, FieldPo
 use relocd::sim::{RenderSettings, Scene, Surroundings, render};
 
 fn clean() -> RenderSettings {
-    RenderSettings { supersample: 3, noise_sigma: 0.0, noise_seed: 0, chroma_subsampling: false }
+    RenderSettings::default()
 }
 
 fn shot(scene: &Scene, pose: &FieldPose, camera: &CameraPose, width: u32, height: u32) -> RgbImage {
@@ -121,4 +121,63 @@ fn goal_post_lands_where_the_camera_model_projects_it() {
     let beside = pixel_at(&image, &camera, Point3::new(post.x, post.y + 0.4, 0.6));
     assert!(on_post.0.iter().all(|channel| *channel > 100), "post pixel {on_post:?}");
     assert_eq!(beside, Rgb([0, 0, 0]), "beside the post the black surroundings show");
+}
+
+#[test]
+fn a_robot_casts_a_shadow_only_when_shadows_are_on() {
+    use nalgebra::{Point2, Vector3};
+    use relocd::sim::{Lighting, Robot};
+    // Light from 30° off vertical, from +x: the shadow falls towards the camera at −x.
+    let lighting = Lighting { direction: Vector3::new(0.5, 0.0, 0.866), ..Lighting::default() };
+    let robot = Robot { position: Point2::new(1.0, 0.5), jersey: [0.1, 0.1, 0.6] };
+    let lit = Scene { lighting, robots: vec![robot], ..Scene::plain(FieldModel::default()) };
+    let shaded = Scene { shadows: true, ..lit.clone() };
+    let pose = FieldPose::new(0.0, 0.5, 0.0).unwrap();
+    let camera =
+        Camera::new(CameraIntrinsics::nao_top(), &pose, &CameraPose::new(0.5, 0.35, 0.0, 0.0).unwrap());
+    // A ground point just in front of the robot's leg (radius 0.08 m), which the leg hides from the light.
+    let ground = Point3::new(0.86, 0.5, 0.0);
+    let brightness = |scene: &Scene| {
+        let pixel = pixel_at(&render(scene, &camera, &clean()), &camera, ground);
+        pixel.0.iter().map(|channel| u32::from(*channel)).sum::<u32>()
+    };
+    let (without, with) = (brightness(&lit), brightness(&shaded));
+    assert!(with < without * 9 / 10, "shadow {with} vs lit {without}");
+    // Far from the robot, shadows change nothing.
+    let open = Point3::new(1.5, 0.9, 0.0);
+    let far = |scene: &Scene| pixel_at(&render(scene, &camera, &clean()), &camera, open);
+    assert_eq!(far(&lit), far(&shaded));
+}
+
+#[test]
+fn wear_textures_the_carpet_and_blur_smears_edges() {
+    use relocd::sim::Wear;
+    let plain = Scene::plain(FieldModel::default());
+    let worn = Scene { wear: Some(Wear { seed: 3, carpet: 0.3, paint: 0.6 }), ..plain.clone() };
+    let pose = FieldPose::new(-2.0, 1.0, -0.3).unwrap();
+    let camera = CameraPose::new(0.5, 0.3, 0.0, 0.0).unwrap();
+    let (clean_shot, worn_shot) =
+        (shot(&plain, &pose, &camera, 160, 120), shot(&worn, &pose, &camera, 160, 120));
+    assert!(differing_fraction(&clean_shot, &worn_shot, 4) > 0.3, "the texture changes the carpet");
+    let intrinsics = CameraIntrinsics::nao_top().with_resolution(160, 120);
+    let placed = Camera::new(intrinsics, &pose, &camera);
+    let blurred = RenderSettings { motion_blur: [0.05, 0.0], ..clean() };
+    let smeared = render(&plain, &placed, &blurred);
+    let changed = differing_fraction(&clean_shot, &smeared, 8);
+    assert!(changed > 0.005 && changed < 0.5, "blur changes the edges only: {changed}");
+}
+
+#[test]
+fn hall_realism_changes_the_scene_but_not_the_pose() {
+    use relocd::sim::Randomisation;
+    let field = FieldModel::default();
+    let plain = Randomisation::default();
+    let real = Randomisation { hall_realism: true, ..Randomisation::default() };
+    for index in 0..8 {
+        let (a, b) = (plain.sample(&field, 9, index, 1), real.sample(&field, 9, index, 1));
+        assert_eq!((a.pose, a.camera), (b.pose, b.camera), "frame {index}");
+        assert!(b.scene.shadows && b.scene.wear.is_some() && !a.scene.shadows && a.scene.wear.is_none());
+        assert_ne!(b.scene.surroundings, Surroundings::Black);
+        assert!(b.scene.robots.len() >= a.scene.robots.len());
+    }
 }

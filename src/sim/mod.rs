@@ -9,6 +9,6 @@ pub mod scene;
 mod trace;
 
 pub use dataset::{DatasetSpec, render_dataset};
-pub use randomise::{Randomisation, SampledFrame};
+pub use randomise::{HallRealism, Randomisation, SampledFrame};
 pub use render::{RenderSettings, render};
-pub use scene::{Lighting, Robot, Scene, Surroundings};
+pub use scene::{Lighting, Robot, Scene, Surroundings, Wear};

@@ -11,7 +11,7 @@ use rand_chacha::ChaCha8Rng;
 
 use super::colour::{colour_temperature, hsv_to_linear};
 use super::render::RenderSettings;
-use super::scene::{Lighting, Robot, Scene, Surroundings};
+use super::scene::{Lighting, Robot, Scene, Surroundings, Wear};
 use super::trace::mix_bits;
 use crate::geometry::{CameraPose, FieldModel, FieldPose};
 
@@ -69,6 +69,68 @@ pub struct Randomisation {
     /// Poses where the rules put a robot back after a penalty (x = −3.2 ± 0.5 m, |y| = 3.35–3.65 m,
     /// facing the field ± 15°) instead of uniform over the carpet.
     pub penalty_return: bool,
+    /// What real halls add ([`HallRealism`]); drawn after everything else, so frames without it stay
+    /// exactly as they were.
+    pub hall_realism: bool,
+}
+
+/// What real halls show that the plain randomisation does not: shadows, a worn and textured carpet,
+/// motion blur, exposure and white-balance errors beyond the light's own, robots standing at the
+/// border, and the cluttered asymmetric hall.
+pub struct HallRealism;
+
+impl HallRealism {
+    /// Relative carpet albedo change of the texture, range.
+    const CARPET_TEXTURE: RangeInclusive<f64> = 0.05..=0.35;
+    /// Share of paint worn through, range.
+    const PAINT_WEAR: RangeInclusive<f64> = 0.0..=0.6;
+    /// Probability that a frame is blurred, and the longest blur as a share of the image width (6 px
+    /// of 640).
+    const MOTION_BLUR: (f64, f64) = (0.5, 6.0 / 640.0);
+    /// Exposure error factor on top of the light's intensity.
+    const EXPOSURE: RangeInclusive<f64> = 0.6..=1.5;
+    /// Per-channel white-balance error factor.
+    const CHANNEL_GAIN: RangeInclusive<f64> = 0.88..=1.12;
+    /// Most robots standing on the border strip.
+    const BORDER_ROBOTS: usize = 3;
+
+    fn apply(field: &FieldModel, rng: &mut ChaCha8Rng, frame: &mut SampledFrame) {
+        let scene = &mut frame.scene;
+        scene.shadows = true;
+        scene.wear = Some(Wear {
+            seed: rng.random(),
+            carpet: rng.random_range(Self::CARPET_TEXTURE),
+            paint: rng.random_range(Self::PAINT_WEAR),
+        });
+        let exposure = rng.random_range(Self::EXPOSURE);
+        for channel in &mut scene.lighting.colour {
+            *channel *= exposure * rng.random_range(Self::CHANNEL_GAIN);
+        }
+        let dimensions = field.dimensions();
+        let (half_length, half_width) = (dimensions.field_length / 2.0, dimensions.field_width / 2.0);
+        for _ in 0..rng.random_range(0..=Self::BORDER_ROBOTS) {
+            let along_touchline = rng.random_bool(0.7);
+            let outward = rng.random_range(0.1..=dimensions.border_strip_width);
+            let side = if rng.random_bool(0.5) { 1.0 } else { -1.0 };
+            let position = if along_touchline {
+                Point2::new(rng.random_range(-half_length..=half_length), side * (half_width + outward))
+            } else {
+                Point2::new(side * (half_length + outward), rng.random_range(-half_width..=half_width))
+            };
+            if (position - frame.pose.position()).norm() > 0.35 {
+                let (hue, saturation, value) = JERSEY_COLOURS[rng.random_range(0..JERSEY_COLOURS.len())];
+                scene.robots.push(Robot { position, jersey: hsv_to_linear(hue, saturation, value) });
+            }
+        }
+        if scene.surroundings == Surroundings::Black {
+            scene.surroundings = Surroundings::Asymmetric { seed: rng.random() };
+        }
+        if rng.random_bool(Self::MOTION_BLUR.0) {
+            let length = rng.random_range(0.0..=Self::MOTION_BLUR.1);
+            let direction = rng.random_range(-PI..PI);
+            frame.settings.motion_blur = [length * direction.cos(), length * direction.sin()];
+        }
+    }
 }
 
 impl Default for Randomisation {
@@ -92,6 +154,7 @@ impl Default for Randomisation {
             noise_sigma: 0.5..=5.0,
             asymmetric_surroundings: false,
             penalty_return: false,
+            hall_realism: false,
         }
     }
 }
@@ -194,14 +257,21 @@ impl Randomisation {
             robots,
             ball,
             surroundings,
+            shadows: false,
+            wear: None,
         };
         let settings = RenderSettings {
             supersample,
             noise_sigma: rng.random_range(self.noise_sigma.clone()),
             noise_seed: rng.random(),
             chroma_subsampling: true,
+            motion_blur: [0.0; 2],
         };
-        SampledFrame { pose, camera, scene, settings }
+        let mut frame = SampledFrame { pose, camera, scene, settings };
+        if self.hall_realism {
+            HallRealism::apply(field, &mut rng, &mut frame);
+        }
+        frame
     }
 
     /// A head yaw uniform in ±`max_head_yaw`, or 0 (drawing nothing) when the head does not turn.

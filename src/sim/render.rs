@@ -22,12 +22,21 @@ pub struct RenderSettings {
     /// Share chroma between horizontal pixel pairs as the camera's YUYV 4:2:2 does (needs an even
     /// width; images of odd width are left as they are).
     pub chroma_subsampling: bool,
+    /// Motion blur: the image moves by (u, v) while the shutter is open, as shares of the image width
+    /// (so the same blur at any resolution); the supersampled rays spread along it.
+    pub motion_blur: [f64; 2],
 }
 
 impl Default for RenderSettings {
-    /// 3×3 supersampling, no noise, no chroma subsampling: a clean image.
+    /// 3×3 supersampling, no noise, no chroma subsampling, no blur: a clean image.
     fn default() -> Self {
-        Self { supersample: 3, noise_sigma: 0.0, noise_seed: 0, chroma_subsampling: false }
+        Self {
+            supersample: 3,
+            noise_sigma: 0.0,
+            noise_seed: 0,
+            chroma_subsampling: false,
+            motion_blur: [0.0; 2],
+        }
     }
 }
 
@@ -41,9 +50,15 @@ pub fn render(scene: &Scene, camera: &Camera, settings: &RenderSettings) -> RgbI
     pixels.par_chunks_mut(width as usize * 3).enumerate().for_each(|(row, line)| {
         for (column, pixel) in line.chunks_exact_mut(3).enumerate() {
             let mut sum = [0.0; 3];
-            for dv in &offsets {
-                for du in &offsets {
-                    let direction = camera.ray_direction(column as f64 + du, row as f64 + dv);
+            for (i, dv) in offsets.iter().enumerate() {
+                for (j, du) in offsets.iter().enumerate() {
+                    // Each ray is a moment of the exposure: spread along the blur.
+                    let moment =
+                        (i * offsets.len() + j) as f64 / (offsets.len() * offsets.len()) as f64 - 0.5;
+                    let [blur_u, blur_v] =
+                        settings.motion_blur.map(|share| share * f64::from(width) * moment);
+                    let direction =
+                        camera.ray_direction(column as f64 + du + blur_u, row as f64 + dv + blur_v);
                     let colour = trace(scene, &Ray { origin, direction });
                     for channel in 0..3 {
                         sum[channel] += colour[channel];

@@ -70,6 +70,18 @@ pub(crate) mod body {
     pub const HEAD_RADIUS: f64 = 0.075;
 }
 
+/// Carpet texture and wear: procedural value noise that darkens and lightens the carpet in patches and
+/// wears the paint of the lines through to the carpet.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Wear {
+    /// Chooses the pattern.
+    pub seed: u64,
+    /// Relative change of the carpet's albedo at the noise's extremes, e.g. 0.2 for ±20%.
+    pub carpet: f64,
+    /// Largest share of a line's paint worn through to the carpet, in [0, 1].
+    pub paint: f64,
+}
+
 /// Radius of the SPL ball.
 pub const BALL_RADIUS: f64 = 0.05;
 
@@ -94,11 +106,15 @@ pub struct Scene {
     pub ball: Option<Point2<f64>>,
     /// What lies beyond the carpet.
     pub surroundings: Surroundings,
+    /// Whether robots, the ball and the goal posts cast shadows of the main light onto the carpet.
+    pub shadows: bool,
+    /// Carpet texture and line wear, if any.
+    pub wear: Option<Wear>,
 }
 
 impl Scene {
     /// The plain scene: default field and light, a mid-green carpet, no nets, robots or ball, black
-    /// surroundings. Symmetric under the field's point symmetry.
+    /// surroundings, no shadows or wear. Symmetric under the field's point symmetry.
     pub fn plain(field: FieldModel) -> Self {
         Self {
             field,
@@ -110,6 +126,8 @@ impl Scene {
             robots: Vec::new(),
             ball: None,
             surroundings: Surroundings::Black,
+            shadows: false,
+            wear: None,
         }
     }
 }

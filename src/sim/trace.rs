@@ -98,14 +98,62 @@ fn surroundings_or_ground(scene: &Scene, ray: &Ray) -> (Linear, f64) {
         let hit = ray.at(t);
         let point = Point2::new(hit.x, hit.y);
         if scene.field.is_on_carpet(point) {
-            let albedo = if scene.field.is_painted(point) { scene.paint } else { scene.carpet };
-            return (multiply(albedo, scene.lighting.shade(&Vector3::z())), t);
+            let albedo = ground_albedo(scene, point);
+            let light = if scene.shadows && in_shadow(scene, &hit) {
+                scene.lighting.shade(&Vector3::zeros())
+            } else {
+                scene.lighting.shade(&Vector3::z())
+            };
+            return (multiply(albedo, light), t);
         }
     }
     match scene.surroundings {
         Surroundings::Black => ([0.0; 3], f64::INFINITY),
         Surroundings::Asymmetric { seed } => hall(scene, ray, seed),
     }
+}
+
+/// The carpet's or the paint's albedo at a ground point, with texture and wear where the scene has them.
+fn ground_albedo(scene: &Scene, point: Point2<f64>) -> Linear {
+    let painted = scene.field.is_painted(point);
+    let Some(wear) = scene.wear else {
+        return if painted { scene.paint } else { scene.carpet };
+    };
+    // Patches (about a metre) and grain (a few centimetres) of the carpet.
+    let texture = 0.7 * value_noise(wear.seed, point, 1.0) + 0.3 * value_noise(wear.seed ^ 1, point, 0.04);
+    let carpet = scene.carpet.map(|channel| channel * (1.0 + wear.carpet * texture));
+    if !painted {
+        return carpet;
+    }
+    let worn = wear.paint * value_noise(wear.seed ^ 2, point, 0.3).max(0.0);
+    mix(scene.paint, carpet, worn)
+}
+
+/// Smooth value noise in [−1, 1] with features `scale` metres across.
+fn value_noise(seed: u64, point: Point2<f64>, scale: f64) -> f64 {
+    let (x, y) = (point.x / scale, point.y / scale);
+    let (cell_x, cell_y) = (x.floor(), y.floor());
+    let lattice = |i: f64, j: f64| {
+        let bits = mix_bits(seed ^ mix_bits((i as i64 as u64) ^ mix_bits(j as i64 as u64)));
+        (bits >> 11) as f64 / (1u64 << 52) as f64 - 1.0
+    };
+    let smooth = |t: f64| t * t * (3.0 - 2.0 * t);
+    let (fx, fy) = (smooth(x - cell_x), smooth(y - cell_y));
+    let top = lattice(cell_x, cell_y) * (1.0 - fx) + lattice(cell_x + 1.0, cell_y) * fx;
+    let bottom = lattice(cell_x, cell_y + 1.0) * (1.0 - fx) + lattice(cell_x + 1.0, cell_y + 1.0) * fx;
+    top * (1.0 - fy) + bottom * fy
+}
+
+/// Whether a robot, the ball or a goal post stands between a ground point and the main light.
+fn in_shadow(scene: &Scene, ground: &Point3<f64>) -> bool {
+    let ray = Ray { origin: ground + Vector3::z() * 1e-6, direction: scene.lighting.direction };
+    scene.robots.iter().any(|robot| robot_hit(scene, &ray, robot.position, robot.jersey).is_some())
+        || scene.ball.is_some_and(|ball| ball_hit(&ray, ball).is_some())
+        || scene.field.goals.iter().any(|goal| {
+            goal.posts
+                .iter()
+                .any(|post| vertical_cylinder(&ray, *post, goal.post_radius, 0.0, goal.height).is_some())
+        })
 }
 
 /// The hall around the carpet: grey floor, panelled walls, dark ceiling.
