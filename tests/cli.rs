@@ -141,6 +141,37 @@ fn replay_with_no_arguments_runs_the_sample_through_the_default_model() {
 }
 
 #[test]
+fn replay_refines_the_sample_against_the_field_lines() {
+    let dir = tempfile::tempdir().unwrap();
+    let metrics_path = dir.path().join("metrics.json");
+    let output = relocd(&["replay", "--refine", "--metrics-json", metrics_path.to_str().unwrap()]);
+    assert!(output.status.success(), "{}", stderr(&output));
+    let lines: Vec<serde_json::Value> =
+        stdout(&output).lines().map(|line| serde_json::from_str(line).unwrap()).collect();
+    // Each frame's line, then its refined "burst" of one.
+    assert_eq!(lines.len(), 48);
+    let refined: Vec<&serde_json::Value> = lines.iter().filter(|line| line.get("burst").is_some()).collect();
+    assert_eq!(refined.len(), 24);
+    for line in &refined {
+        let checks: Vec<&str> = line["hypotheses"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|h| h["lines"]["check"].as_str().unwrap())
+            .collect();
+        assert_eq!(checks[0], checks[1], "point-symmetric twins get the same verdict: {line}");
+    }
+    let metrics: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&metrics_path).unwrap()).unwrap();
+    let lines_block = &metrics["refined"];
+    assert_eq!(lines_block["bursts"], 24);
+    assert!(lines_block["refined_share"].as_f64().unwrap() >= 0.5, "{lines_block}");
+    let median = lines_block["where_refined"]["location_median_m"].as_f64().unwrap();
+    assert!(median < 0.05, "refined median {median} m");
+    assert!(stderr(&output).contains("lines best"), "{}", stderr(&output));
+}
+
+#[test]
 fn replay_fuses_rendered_bursts_of_a_standing_robot() {
     let dir = tempfile::tempdir().unwrap();
     let recording = dir.path().join("bursts");
