@@ -7,12 +7,15 @@
 use std::path::Path;
 
 use crate::daemon::config::Config;
-use crate::frame::YuyvImage;
+use crate::frame::{Frame, YuyvImage};
+use crate::geometry::CameraIntrinsics;
 use crate::protocol::control::ControlRequest;
 use crate::protocol::frame_header::{FrameHeader, HEADER_SIZE};
 use crate::protocol::gamecontroller::GameControlData;
 use crate::protocol::lola::LolaState;
 use crate::recording::FrameRecord;
+use crate::refine::detect;
+use crate::refine::detect;
 use crate::relocaliser::{Model, ModelContract};
 
 /// A check: panics when its decoder breaks its contract on these bytes.
@@ -49,8 +52,8 @@ pub fn control(bytes: &[u8]) {
     }
 }
 
-/// A forwarded frame, header then payload: a parsed header round-trips, and its payload size is
-/// exactly what makes a YUYV image of its size.
+/// A forwarded frame, header then payload: a parsed header round-trips, its payload size is exactly
+/// what makes a YUYV image of its size, and line points found in it are finite.
 pub fn frame(bytes: &[u8]) {
     let Some((header, payload)) = bytes.split_first_chunk::<HEADER_SIZE>() else { return };
     if let Ok(parsed) = FrameHeader::parse(header) {
@@ -58,6 +61,15 @@ pub fn frame(bytes: &[u8]) {
         let size = parsed.payload_size();
         let image = YuyvImage::new(parsed.width, parsed.height, payload.to_vec());
         assert_eq!(image.is_ok(), payload.len() == size, "payload {} for a header of {size}", payload.len());
+        // Whatever the pixels, line points are finite and on the ground in front of the camera.
+        if let Ok(image) = image {
+            let camera = parsed.camera.unwrap_or_default();
+            let found = detect(&Frame::Yuyv(image), &CameraIntrinsics::nao_top(), &camera, 0.05)
+                .expect("a valid frame can be searched");
+            for point in found.points {
+                assert!(point.ground.x.is_finite() && point.ground.y.is_finite(), "{point:?}");
+            }
+        }
     }
 }
 

@@ -168,12 +168,15 @@ impl LineRefiner {
         observations: &[Observation],
         hypothesis: &FusedHypothesis,
     ) -> (FusedHypothesis, f64) {
+        // A spread that is not a number searches the widest region.
+        let bounded =
+            |sigma: f64, low: f64, high: f64| if sigma.is_finite() { sigma.clamp(low, high) } else { high };
         let prior = Prior {
             pose: hypothesis.pose,
             sigma: Vector3::new(
-                hypothesis.sigma.x.clamp(MIN_PRIOR_SIGMA.0, MAX_PRIOR_SIGMA.0),
-                hypothesis.sigma.y.clamp(MIN_PRIOR_SIGMA.0, MAX_PRIOR_SIGMA.0),
-                hypothesis.sigma.theta.clamp(MIN_PRIOR_SIGMA.1, MAX_PRIOR_SIGMA.1),
+                bounded(hypothesis.sigma.x, MIN_PRIOR_SIGMA.0, MAX_PRIOR_SIGMA.0),
+                bounded(hypothesis.sigma.y, MIN_PRIOR_SIGMA.0, MAX_PRIOR_SIGMA.0),
+                bounded(hypothesis.sigma.theta, MIN_PRIOR_SIGMA.1, MAX_PRIOR_SIGMA.1),
             ),
         };
         let fitted = fit(&self.map, observations, &prior);

@@ -186,7 +186,8 @@ pub fn fit(map: &LineMap, observations: &[Observation], prior: &Prior) -> Fit {
     let covariance =
         state.hessian.try_inverse().unwrap_or_else(|| Matrix3::from_diagonal(&prior.sigma.map(|s| s * s)));
     Fit {
-        pose: FieldPose::new(pose.x, pose.y, pose.z).expect("a finite fit"),
+        // Finite points and a finite prior give a finite fit; should that ever fail, keep the prior.
+        pose: FieldPose::new(pose.x, pose.y, pose.z).unwrap_or(prior.pose),
         cost: state.cost,
         covariance,
         line_information: state.line_information,
