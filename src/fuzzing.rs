@@ -15,7 +15,6 @@ use crate::protocol::gamecontroller::GameControlData;
 use crate::protocol::lola::LolaState;
 use crate::recording::FrameRecord;
 use crate::refine::detect;
-use crate::refine::detect;
 use crate::relocaliser::{Model, ModelContract};
 
 /// A check: panics when its decoder breaks its contract on these bytes.
