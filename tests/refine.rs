@@ -3,7 +3,8 @@
 //! unrefined, and bad inputs are clear errors.
 //!
 //! `RELOCD_REFINE_FRAMES=N cargo test --release --test refine -- --nocapture` runs the convergence
-//! check on N frames and prints the figures (BENCHMARKS.md, "Line refinement").
+//! check on N frames and prints the figures (BENCHMARKS.md, "Line refinement"); with
+//! `RELOCD_REFINE_REALISM=1`, on frames with hall realism.
 
 use image::{Rgb, RgbImage};
 use relocd::frame::{Frame, YuyvImage};
@@ -17,8 +18,17 @@ use relocd::sim::{Randomisation, SampledFrame, render};
 const SEED: u64 = 7100;
 
 fn rendered(index: u64) -> (SampledFrame, Frame) {
+    rendered_with(Randomisation::default(), index)
+}
+
+/// Frames with what real halls add (`render --hall-realism`).
+fn rendered_in_a_hall(index: u64) -> (SampledFrame, Frame) {
+    rendered_with(Randomisation { hall_realism: true, ..Randomisation::default() }, index)
+}
+
+fn rendered_with(randomisation: Randomisation, index: u64) -> (SampledFrame, Frame) {
     let field = FieldModel::default();
-    let sampled = Randomisation::default().sample(&field, SEED, index, 2);
+    let sampled = randomisation.sample(&field, SEED, index, 2);
     let camera = Camera::new(CameraIntrinsics::nao_top(), &sampled.pose, &sampled.camera);
     let image = render(&sampled.scene, &camera, &sampled.settings);
     (sampled, Frame::Rgb(image))
@@ -72,31 +82,49 @@ fn sees_two_directions(refiner: &LineRefiner, percepts: &FramePercepts, truth: &
     })
 }
 
-#[test]
-fn percepts_land_on_the_true_lines() {
+/// Distances of the line points of frames 0..12 from the true lines, sorted.
+fn distances_from_the_true_lines(render: fn(u64) -> (SampledFrame, Frame)) -> Vec<f64> {
     let field = FieldModel::default();
     let refiner = LineRefiner::new(&field);
     let mut distances = Vec::new();
     for index in 0..12 {
-        let (sampled, frame) = rendered(index);
+        let (sampled, frame) = render(index);
         for point in percepts(&refiner, &sampled, &frame).points {
             distances.push(field.distance_to_nearest_line(sampled.pose.robot_to_field(point.ground)));
         }
     }
-    assert!(distances.len() > 300, "only {} line points in 12 frames", distances.len());
     distances.sort_by(f64::total_cmp);
+    distances
+}
+
+#[test]
+fn percepts_land_on_the_true_lines() {
+    let distances = distances_from_the_true_lines(rendered);
+    assert!(distances.len() > 300, "only {} line points in 12 frames", distances.len());
     let median = distances[distances.len() / 2];
     let p95 = distances[distances.len() * 95 / 100];
     assert!(median < 0.02 && p95 < 0.06, "median {median:.3} m, 95th percentile {p95:.3} m");
 }
 
 #[test]
+fn percepts_survive_shadows_wear_blur_and_a_cluttered_hall() {
+    let distances = distances_from_the_true_lines(rendered_in_a_hall);
+    assert!(distances.len() > 200, "only {} line points in 12 frames", distances.len());
+    let median = distances[distances.len() / 2];
+    let p90 = distances[distances.len() * 9 / 10];
+    assert!(median < 0.03 && p90 < 0.1, "median {median:.3} m, 90th percentile {p90:.3} m");
+}
+
+#[test]
 fn refinement_recovers_perturbed_poses() {
     let frames: u64 = std::env::var("RELOCD_REFINE_FRAMES").ok().and_then(|n| n.parse().ok()).unwrap_or(40);
+    // RELOCD_REFINE_REALISM=1: the same on frames with hall realism.
+    let render =
+        if std::env::var_os("RELOCD_REFINE_REALISM").is_some() { rendered_in_a_hall } else { rendered };
     let refiner = LineRefiner::new(&FieldModel::default());
     let (mut eligible, mut recovered) = (0usize, 0usize);
     for index in 0..frames {
-        let (sampled, frame) = rendered(index);
+        let (sampled, frame) = render(index);
         let percepts = percepts(&refiner, &sampled, &frame);
         if !sees_two_directions(&refiner, &percepts, &sampled.pose) {
             continue;
