@@ -126,7 +126,7 @@ fn goal_post_lands_where_the_camera_model_projects_it() {
 #[test]
 fn a_robot_casts_a_shadow_only_when_shadows_are_on() {
     use nalgebra::{Point2, Vector3};
-    use relocd::sim::{Lighting, Robot};
+    use relocd::sim::{Lighting, Robot, SecondLight};
     // Light from 30° off vertical, from +x: the shadow falls towards the camera at −x.
     let lighting = Lighting { direction: Vector3::new(0.5, 0.0, 0.866), ..Lighting::default() };
     let robot = Robot { position: Point2::new(1.0, 0.5), jersey: [0.1, 0.1, 0.6] };
@@ -147,6 +147,16 @@ fn a_robot_casts_a_shadow_only_when_shadows_are_on() {
     let open = Point3::new(1.5, 0.9, 0.0);
     let far = |scene: &Scene| pixel_at(&render(scene, &camera, &clean()), &camera, open);
     assert_eq!(far(&lit), far(&shaded));
+
+    // A second lamp from +x casts its own, fainter shadow when the main light is overhead.
+    let overhead = Lighting {
+        second: Some(SecondLight { direction: Vector3::new(0.5, 0.0, 0.866), share: 0.4 }),
+        ..Lighting::default()
+    };
+    let two_lamps = Scene { lighting: overhead, ..shaded.clone() };
+    let faint = brightness(&two_lamps);
+    let unshadowed = brightness(&Scene { shadows: false, ..two_lamps.clone() });
+    assert!(faint < unshadowed && faint > with, "second-lamp shadow {faint}, lit {unshadowed}, full {with}");
 }
 
 #[test]

@@ -11,4 +11,4 @@ mod trace;
 pub use dataset::{DatasetSpec, render_dataset};
 pub use randomise::{HallRealism, Randomisation, SampledFrame};
 pub use render::{RenderSettings, render};
-pub use scene::{Lighting, Robot, Scene, Surroundings, Wear};
+pub use scene::{Lighting, Robot, Scene, SecondLight, Surroundings, Wear};

@@ -11,7 +11,7 @@ use rand_chacha::ChaCha8Rng;
 
 use super::colour::{colour_temperature, hsv_to_linear};
 use super::render::RenderSettings;
-use super::scene::{Lighting, Robot, Scene, Surroundings, Wear};
+use super::scene::{Lighting, Robot, Scene, SecondLight, Surroundings, Wear};
 use super::trace::mix_bits;
 use crate::geometry::{CameraPose, FieldModel, FieldPose};
 
@@ -74,8 +74,8 @@ pub struct Randomisation {
     pub hall_realism: bool,
 }
 
-/// What real halls show that the plain randomisation does not: shadows, a worn and textured carpet,
-/// motion blur, exposure and white-balance errors beyond the light's own, robots standing at the
+/// What real halls show that the plain randomisation does not: shadows of a second lamp as well as the
+/// first, a worn and textured carpet, motion blur, exposure and white-balance errors beyond the light's own, robots standing at the
 /// border, and the cluttered asymmetric hall.
 pub struct HallRealism;
 
@@ -91,6 +91,8 @@ impl HallRealism {
     const EXPOSURE: RangeInclusive<f64> = 0.6..=1.5;
     /// Per-channel white-balance error factor.
     const CHANNEL_GAIN: RangeInclusive<f64> = 0.88..=1.12;
+    /// Probability of a second lamp, its tilt from vertical (radians) and its share of the direct light.
+    const SECOND_LIGHT: (f64, RangeInclusive<f64>, RangeInclusive<f64>) = (0.7, 0.17..=0.87, 0.2..=0.5);
     /// Most robots standing on the border strip.
     const BORDER_ROBOTS: usize = 3;
 
@@ -102,6 +104,14 @@ impl HallRealism {
             carpet: rng.random_range(Self::CARPET_TEXTURE),
             paint: rng.random_range(Self::PAINT_WEAR),
         });
+        if rng.random_bool(Self::SECOND_LIGHT.0) {
+            let tilt = rng.random_range(Self::SECOND_LIGHT.1.clone());
+            let azimuth = rng.random_range(-PI..PI);
+            scene.lighting.second = Some(SecondLight {
+                direction: Vector3::new(tilt.sin() * azimuth.cos(), tilt.sin() * azimuth.sin(), tilt.cos()),
+                share: rng.random_range(Self::SECOND_LIGHT.2.clone()),
+            });
+        }
         let exposure = rng.random_range(Self::EXPOSURE);
         for channel in &mut scene.lighting.colour {
             *channel *= exposure * rng.random_range(Self::CHANNEL_GAIN);
@@ -214,6 +224,7 @@ impl Randomisation {
             colour: tint.map(|channel| channel * intensity),
             direction: Vector3::new(tilt.sin() * azimuth.cos(), tilt.sin() * azimuth.sin(), tilt.cos()),
             ambient: rng.random_range(self.ambient.clone()),
+            second: None,
         };
         let carpet = hsv_to_linear(
             rng.random_range(self.carpet_hue.clone()),

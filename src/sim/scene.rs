@@ -28,12 +28,38 @@ pub struct Lighting {
     pub direction: Vector3<f64>,
     /// Fraction of the light that arrives diffusely from all around, in [0, 1].
     pub ambient: f64,
+    /// A second lamp, if any.
+    pub second: Option<SecondLight>,
+}
+
+/// A second lamp: it takes a share of the direct light (and casts its own shadows).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SecondLight {
+    /// Unit vector pointing towards it.
+    pub direction: Vector3<f64>,
+    /// Its share of the direct (non-ambient) light, in [0, 1].
+    pub share: f64,
 }
 
 impl Lighting {
-    /// Shading factor of a surface with unit normal `normal`.
+    /// Shading factor of a surface with unit normal `normal` that every light reaches.
     pub fn shade(&self, normal: &Vector3<f64>) -> Linear {
-        let factor = self.ambient + (1.0 - self.ambient) * normal.dot(&self.direction).max(0.0);
+        self.shade_lit(normal, [true, true])
+    }
+
+    /// Shading factor of a surface with unit normal `normal` that the main and the second light reach
+    /// or not (`lit`); the ambient share always arrives.
+    pub fn shade_lit(&self, normal: &Vector3<f64>, lit: [bool; 2]) -> Linear {
+        let facing =
+            |direction: &Vector3<f64>, lit: bool| if lit { normal.dot(direction).max(0.0) } else { 0.0 };
+        let direct = match self.second {
+            None => facing(&self.direction, lit[0]),
+            Some(second) => {
+                (1.0 - second.share) * facing(&self.direction, lit[0])
+                    + second.share * facing(&second.direction, lit[1])
+            }
+        };
+        let factor = self.ambient + (1.0 - self.ambient) * direct;
         self.colour.map(|channel| channel * factor)
     }
 }
@@ -41,7 +67,7 @@ impl Lighting {
 impl Default for Lighting {
     /// White light from straight above, as in a hall with ceiling lamps.
     fn default() -> Self {
-        Self { colour: [0.95; 3], direction: Vector3::z(), ambient: 0.6 }
+        Self { colour: [0.95; 3], direction: Vector3::z(), ambient: 0.6, second: None }
     }
 }
 

@@ -99,8 +99,11 @@ fn surroundings_or_ground(scene: &Scene, ray: &Ray) -> (Linear, f64) {
         let point = Point2::new(hit.x, hit.y);
         if scene.field.is_on_carpet(point) {
             let albedo = ground_albedo(scene, point);
-            let light = if scene.shadows && in_shadow(scene, &hit) {
-                scene.lighting.shade(&Vector3::zeros())
+            let light = if scene.shadows {
+                let lighting = &scene.lighting;
+                let second_lit =
+                    lighting.second.is_none_or(|second| !in_shadow(scene, &hit, second.direction));
+                lighting.shade_lit(&Vector3::z(), [!in_shadow(scene, &hit, lighting.direction), second_lit])
             } else {
                 scene.lighting.shade(&Vector3::z())
             };
@@ -144,9 +147,9 @@ fn value_noise(seed: u64, point: Point2<f64>, scale: f64) -> f64 {
     top * (1.0 - fy) + bottom * fy
 }
 
-/// Whether a robot, the ball or a goal post stands between a ground point and the main light.
-fn in_shadow(scene: &Scene, ground: &Point3<f64>) -> bool {
-    let ray = Ray { origin: ground + Vector3::z() * 1e-6, direction: scene.lighting.direction };
+/// Whether a robot, the ball or a goal post stands between a ground point and the light `towards`.
+fn in_shadow(scene: &Scene, ground: &Point3<f64>, towards: Vector3<f64>) -> bool {
+    let ray = Ray { origin: ground + Vector3::z() * 1e-6, direction: towards };
     scene.robots.iter().any(|robot| robot_hit(scene, &ray, robot.position, robot.jersey).is_some())
         || scene.ball.is_some_and(|ball| ball_hit(&ray, ball).is_some())
         || scene.field.goals.iter().any(|goal| {
