@@ -40,8 +40,11 @@ const EXPECTED_SPACING: f64 = 0.1;
 const MIN_EXPECTED: usize = 8;
 /// A point within this many σ of a line is an inlier (and always within 5 cm).
 const INLIER_SIGMAS: f64 = 2.5;
-/// Below this line quality (inlier share × seen share) the lines contradict a hypothesis.
-const CONTRADICTED_BELOW: f64 = 0.75;
+/// Least share of the points on a line, and largest share of the expected lines unseen, for a fit to
+/// stand: a true pose has (nearly) all points on lines and sees what it should, while a wrong fit that
+/// found lines elsewhere leaves a few points off or misses a line (measured: BENCHMARKS.md).
+const MIN_INLIER_SHARE: f64 = 0.97;
+const MAX_UNSEEN_SHARE: f64 = 0.05;
 /// Weight factor on top of the quality for a contradicted hypothesis.
 const CONTRADICTED_FACTOR: f64 = 0.1;
 /// Largest line-only σ (position, metres; heading, radians) for a fit to count as fully refined.
@@ -62,7 +65,8 @@ pub enum LineCheck {
     Partial,
     /// Too few line points: the network's hypothesis as it was.
     Unrefined,
-    /// The lines seen do not fit this pose: kept at the network's pose with its weight cut.
+    /// The lines seen do not fit this pose cleanly (points off the lines, or lines it should show
+    /// missing): kept at the network's pose with its weight cut.
     Contradicted,
 }
 
@@ -184,7 +188,7 @@ impl LineRefiner {
         let unseen_share = self.unseen_share(frames, &fitted.pose);
         let quality = inlier_share * (1.0 - unseen_share.unwrap_or(0.0));
         let points = observations.len();
-        if quality < CONTRADICTED_BELOW {
+        if inlier_share < MIN_INLIER_SHARE || unseen_share.is_some_and(|unseen| unseen > MAX_UNSEEN_SHARE) {
             let evidence =
                 LineEvidence { check: LineCheck::Contradicted, points, inlier_share, unseen_share };
             let factor = quality.max(0.01).powi(2) * CONTRADICTED_FACTOR;
