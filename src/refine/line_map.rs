@@ -152,11 +152,6 @@ impl LineMap {
     pub fn residual(&self, point: Point2<f64>) -> (f64, Vector2<f64>) {
         self.nearest(point).residual(point)
     }
-
-    /// Bytes the map holds.
-    pub fn size_bytes(&self) -> usize {
-        self.nearest.len() + 2 * self.distance_mm.len()
-    }
 }
 
 /// Every painted centre line of `field` as primitives: lines, circles, and both arms of every mark.
