@@ -7,6 +7,7 @@ use serde::Serialize;
 use tracing::warn;
 
 use crate::eval::{BurstEvaluation, Evaluation, Metrics, RefinedEvaluation, Sample};
+use crate::frame::Frame;
 use crate::geometry::{CameraIntrinsics, FieldPose};
 use crate::recording::{FrameRecord, Recording};
 use crate::refine::{FramePercepts, LineEvidence, LineRefiner};
@@ -284,7 +285,7 @@ pub fn replay(
 fn frame_percepts(
     refiner: &LineRefiner,
     record: &FrameRecord,
-    frame: &crate::frame::Frame,
+    frame: &Frame,
 ) -> Option<FramePercepts> {
     let Some(camera) = record.camera else {
         warn!(file = %record.file, "no camera pose recorded: frame not used for line refinement");

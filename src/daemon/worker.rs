@@ -1,6 +1,7 @@
 //! The relocalisation thread: waits for triggers, coalesces those that arrive together, waits for a
-//! steady robot, captures a burst, relocalises every frame, fuses, applies the game prior, and
-//! publishes one message that answers every trigger it took. The only place inference runs.
+//! steady robot, captures a burst, relocalises every frame (and finds its line points), fuses,
+//! refines against the field lines, applies the game prior, and publishes one message that answers
+//! every trigger it took. The only place inference runs.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
