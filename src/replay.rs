@@ -282,11 +282,7 @@ pub fn replay(
 
 /// The line points of one frame, or none (with a warning) when its camera pose is not recorded or the
 /// frame cannot be searched.
-fn frame_percepts(
-    refiner: &LineRefiner,
-    record: &FrameRecord,
-    frame: &Frame,
-) -> Option<FramePercepts> {
+fn frame_percepts(refiner: &LineRefiner, record: &FrameRecord, frame: &Frame) -> Option<FramePercepts> {
     let Some(camera) = record.camera else {
         warn!(file = %record.file, "no camera pose recorded: frame not used for line refinement");
         return None;
