@@ -172,6 +172,41 @@ fn replay_refines_the_sample_against_the_field_lines() {
 }
 
 #[test]
+fn replay_refine_without_camera_poses_keeps_the_network_result_and_says_why() {
+    let dir = tempfile::tempdir().unwrap();
+    let sample = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/sample");
+    // The first two sample frames, their records stripped of the camera pose.
+    let index: String = std::fs::read_to_string(sample.join("frames.jsonl"))
+        .unwrap()
+        .lines()
+        .take(2)
+        .map(|line| {
+            let mut record: serde_json::Value = serde_json::from_str(line).unwrap();
+            record.as_object_mut().unwrap().remove("camera");
+            let file = record["file"].as_str().unwrap().to_owned();
+            std::fs::copy(sample.join(&file), dir.path().join(&file)).unwrap();
+            record.to_string() + "\n"
+        })
+        .collect();
+    std::fs::write(dir.path().join("frames.jsonl"), index).unwrap();
+    let output = relocd(&["replay", dir.path().to_str().unwrap(), "--refine"]);
+    assert!(output.status.success(), "{}", stderr(&output));
+    assert!(stderr(&output).contains("no camera pose recorded"), "{}", stderr(&output));
+    let bursts: Vec<serde_json::Value> = stdout(&output)
+        .lines()
+        .map(|line| serde_json::from_str::<serde_json::Value>(line).unwrap())
+        .filter(|line| line.get("burst").is_some())
+        .collect();
+    assert_eq!(bursts.len(), 2);
+    for burst in &bursts {
+        for hypothesis in burst["hypotheses"].as_array().unwrap() {
+            assert_eq!(hypothesis["lines"]["check"], "unrefined", "{burst}");
+            assert_eq!(hypothesis["lines"]["points"], 0, "{burst}");
+        }
+    }
+}
+
+#[test]
 fn replay_fuses_rendered_bursts_of_a_standing_robot() {
     let dir = tempfile::tempdir().unwrap();
     let recording = dir.path().join("bursts");

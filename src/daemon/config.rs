@@ -652,6 +652,10 @@ mod tests {
         assert!(message("[camera]\nheight = 0").contains("camera.height"));
         assert!(message("backend = \"cuda\"").contains("tract"), "{}", message("backend = \"cuda\""));
         assert!(message("max_datagram_bytes = 10").contains("max_datagram_bytes"));
+        let pitch = message("[camera]\npitch_deg = 120");
+        assert!(pitch.contains("camera.height_m/pitch_deg/roll_deg") && pitch.contains("pitch"), "{pitch}");
+        assert!(message("[camera]\nheight_m = -0.5").contains("height"));
+        assert!(message("refine = \"yes\"").contains("refine"), "{}", message("refine = \"yes\""));
         assert!(message("control = \"unix:/tmp/x\"\nsensors = \"unix:/tmp/x\"").contains("different"));
     }
 
