@@ -117,14 +117,6 @@ fn linearise(
     Linearisation { cost, hessian: line_information + prior_information, gradient, line_information }
 }
 
-fn total_cost(map: &LineMap, observations: &[Observation], pose: &Vector3<f64>, prior: &Prior) -> f64 {
-    let lines: f64 = observations
-        .iter()
-        .map(|observation| cauchy(map.residual(to_field(pose, &observation.ground)).0 / observation.sigma))
-        .sum();
-    lines + 0.5 * prior_residual(pose, prior).norm_squared()
-}
-
 /// Levenberg–Marquardt from `start`.
 fn levenberg_marquardt(
     map: &LineMap,
@@ -145,9 +137,11 @@ fn levenberg_marquardt(
             };
             let mut candidate = pose + step;
             candidate.z = normalize_angle(candidate.z);
-            if total_cost(map, observations, &candidate, prior) < state.cost {
+            // Linearised at once: an accepted step needs it next, and a rejected one costs little more.
+            let tried = linearise(map, observations, &candidate, prior);
+            if tried.cost < state.cost {
                 pose = candidate;
-                state = linearise(map, observations, &pose, prior);
+                state = tried;
                 damping = (damping / 3.0).max(1e-9);
                 improved = step.xy().norm() > 1e-5 || step.z.abs() > 1e-6;
                 break;
