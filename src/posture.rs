@@ -110,14 +110,14 @@ mod tests {
     use super::*;
 
     const STANDING: LolaState =
-        LolaState { angles: [0.02, -0.03], gyroscope: [0.0, 0.01, 0.0], fsr: [1.3; 8] };
+        LolaState { angles: [0.02, -0.03], gyroscope: [0.0, 0.01, 0.0], fsr: [1.3; 8], position: Vec::new() };
 
     fn lying() -> LolaState {
-        LolaState { angles: [0.1, 1.5], gyroscope: [0.0; 3], fsr: [0.0; 8] }
+        LolaState { angles: [0.1, 1.5], gyroscope: [0.0; 3], fsr: [0.0; 8], position: Vec::new() }
     }
 
     fn carried() -> LolaState {
-        LolaState { angles: [0.05, 0.2], gyroscope: [0.4, 0.2, 0.1], fsr: [0.02; 8] }
+        LolaState { angles: [0.05, 0.2], gyroscope: [0.4, 0.2, 0.1], fsr: [0.02; 8], position: Vec::new() }
     }
 
     /// Feeds `state` at 83 Hz for `seconds` from `*t`, collecting events.

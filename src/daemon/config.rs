@@ -9,7 +9,7 @@ use std::str::FromStr;
 use serde::Deserialize;
 use thiserror::Error;
 
-use crate::geometry::{CameraPose, PoseError, Representation};
+use crate::geometry::{BodyAngles, CameraPose, PoseError, Representation};
 use crate::protocol::message::Encoding;
 use crate::relocaliser::{Backend, LoadOptions};
 
@@ -181,7 +181,7 @@ impl Config {
         if !self.camera.head_yaw_deg.is_finite() || self.camera.head_yaw_deg.abs() > 120.0 {
             return invalid("camera.head_yaw_deg", "must lie within ±120° (the Nao's head yaw range)");
         }
-        if let Err(error) = self.camera.assumed_pose(0.0) {
+        if let Err(error) = self.camera.mounted() {
             return invalid("camera.height_m/pitch_deg/roll_deg", &error.to_string());
         }
         if !(8..=1280).contains(&self.sim.width) {
@@ -290,21 +290,33 @@ pub struct CameraConfig {
     pub fps: u32,
     /// Keep the V4L2 device streaming between bursts (faster bursts, but the camera stays taken).
     pub keep_streaming: bool,
-    /// Head yaw assumed when neither the trigger nor the frame gives one, degrees (positive: left).
+    /// Head yaw assumed when neither the frame, the trigger nor the sensors give one, degrees
+    /// (positive: left).
     pub head_yaw_deg: f64,
-    /// Camera height above the ground assumed when the frame does not carry its camera pose, metres
-    /// (line refinement projects with it).
+    /// Camera height above the ground when the frame does not carry its camera pose, metres (line
+    /// refinement projects with it).
     pub height_m: f64,
-    /// Camera pitch assumed likewise, degrees (positive looks down; a standing Nao's top camera: 1.2°).
+    /// Camera pitch with the torso upright and the head at zero, degrees (positive looks down; the
+    /// Nao's top camera is mounted 1.2° down); the sensed torso and head angles are added to it.
     pub pitch_deg: f64,
-    /// Camera roll assumed likewise, degrees.
+    /// Camera roll likewise, degrees.
     pub roll_deg: f64,
 }
 
 impl CameraConfig {
-    /// The camera pose on the robot assumed when a frame does not carry one, with `head_yaw` radians.
-    pub fn assumed_pose(&self, head_yaw: f64) -> Result<CameraPose, PoseError> {
-        CameraPose::new(self.height_m, self.pitch_deg.to_radians(), self.roll_deg.to_radians(), head_yaw)
+    /// The camera pose with the torso upright and the head at zero: the configured height, pitch and
+    /// roll.
+    pub fn mounted(&self) -> Result<CameraPose, PoseError> {
+        CameraPose::new(self.height_m, self.pitch_deg.to_radians(), self.roll_deg.to_radians(), 0.0)
+    }
+
+    /// The pose of a camera whose frame does not carry one: the mounted camera turned by the body angles
+    /// the sensors report (an upright body with the configured head yaw when they report none); a
+    /// trigger's `head_yaw` replaces the head yaw either way.
+    pub fn pose_on(&self, body: Option<BodyAngles>, head_yaw: Option<f64>) -> Result<CameraPose, PoseError> {
+        let body =
+            body.unwrap_or(BodyAngles { head_yaw: self.head_yaw_deg.to_radians(), ..BodyAngles::default() });
+        self.mounted()?.on_body(&BodyAngles { head_yaw: head_yaw.unwrap_or(body.head_yaw), ..body })
     }
 }
 
@@ -657,6 +669,22 @@ mod tests {
         assert!(message("[camera]\nheight_m = -0.5").contains("height"));
         assert!(message("refine = \"yes\"").contains("refine"), "{}", message("refine = \"yes\""));
         assert!(message("control = \"unix:/tmp/x\"\nsensors = \"unix:/tmp/x\"").contains("different"));
+    }
+
+    #[test]
+    fn the_camera_pose_comes_from_the_sensors_the_trigger_or_the_config() {
+        let camera = CameraConfig { head_yaw_deg: 30.0, pitch_deg: 2.0, ..CameraConfig::default() };
+        let assumed = camera.pose_on(None, None).unwrap();
+        assert!((assumed.head_yaw() - 30f64.to_radians()).abs() < 1e-12);
+        assert!((assumed.pitch() - 2f64.to_radians()).abs() < 1e-12);
+        let body = BodyAngles { head_yaw: 0.5, head_pitch: 0.2, ..BodyAngles::default() };
+        let sensed = camera.pose_on(Some(body), None).unwrap();
+        assert!((sensed.head_yaw() - 0.5).abs() < 1e-12, "the sensed yaw replaces the configured one");
+        assert!((sensed.pitch() - (2f64.to_radians() + 0.2)).abs() < 1e-12);
+        let requested = camera.pose_on(Some(body), Some(-0.25)).unwrap();
+        assert!((requested.head_yaw() + 0.25).abs() < 1e-12, "a trigger's yaw wins");
+        assert_eq!(requested.pitch(), sensed.pitch());
+        assert!(camera.pose_on(Some(BodyAngles { torso_roll: f64::NAN, ..body }), None).is_err());
     }
 
     #[test]

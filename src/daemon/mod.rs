@@ -26,7 +26,7 @@ use self::sockets::Datagram;
 use self::source::FrameSource;
 use self::source::forwarded::{ForwardedSource, FrameQueue};
 use self::status::Status;
-use self::triggers::{Steadiness, Triggers};
+use self::triggers::{Sensed, Triggers};
 use self::worker::{ModelSlot, Worker};
 use crate::geometry::FieldModel;
 use crate::posture::{PostureConfig, PostureDetector};
@@ -63,7 +63,7 @@ pub fn run(config: Config) -> anyhow::Result<()> {
     let stop = Arc::new(AtomicBool::new(false));
     let queue = Arc::new(TriggerQueue::new(TRIGGER_QUEUE));
     let triggers = Triggers::new(queue.clone(), status.clone());
-    let steadiness = Arc::new(Steadiness::default());
+    let sensed = Arc::new(Sensed::default());
 
     // Sockets are bound inside the runtime and owned by their tasks, which remove Unix socket files
     // when the runtime drops them at shutdown.
@@ -73,7 +73,7 @@ pub fn run(config: Config) -> anyhow::Result<()> {
         let interrupt = signal(SignalKind::interrupt())?;
         let hangup = signal(SignalKind::hangup())?;
         let source = open_source(&config, &model, &status)?;
-        start_inputs(&config, &triggers, &steadiness, &status)?;
+        start_inputs(&config, &triggers, &sensed, &status)?;
         anyhow::Ok((source, terminate, interrupt, hangup))
     })?;
     drop(triggers);
@@ -87,7 +87,7 @@ pub fn run(config: Config) -> anyhow::Result<()> {
         burst: config.burst.clone(),
         camera: config.camera.clone(),
         refiner,
-        steadiness,
+        sensed,
         status: status.clone(),
         stop: stop.clone(),
         replacement: replacement.clone(),
@@ -245,7 +245,7 @@ fn described(listen: &Listen) -> String {
 fn start_inputs(
     config: &Config,
     triggers: &Triggers,
-    steadiness: &Arc<Steadiness>,
+    sensed: &Arc<Sensed>,
     status: &Arc<Status>,
 ) -> anyhow::Result<()> {
     let gamecontroller = &config.gamecontroller;
@@ -280,7 +280,7 @@ fn start_inputs(
                 socket,
                 config.max_datagram_bytes,
                 detector,
-                steadiness.clone(),
+                sensed.clone(),
                 triggers.clone(),
                 status.clone(),
             ));
@@ -289,7 +289,7 @@ fn start_inputs(
             tokio::spawn(triggers::lola_stream(
                 path.clone(),
                 detector,
-                steadiness.clone(),
+                sensed.clone(),
                 triggers.clone(),
                 status.clone(),
             ));

@@ -17,6 +17,7 @@ use super::queue::{Queued, TriggerQueue};
 use super::sockets::{Datagram, MAX_DATAGRAM, Peer};
 use super::source::unix_now;
 use super::status::{GameInfo, Status};
+use crate::geometry::BodyAngles;
 use crate::posture::{PostureDetector, PostureEvent};
 use crate::protocol::control::ControlRequest;
 use crate::protocol::gamecontroller::{GameControlData, PacketOrder, PenaltyWatch};
@@ -80,19 +81,37 @@ impl Triggers {
     }
 }
 
-/// Whether the robot stands still, as the sensor task last saw it.
+/// What the sensor task last saw: whether the robot stands still and, when its messages carry the head
+/// joints, the body angles that turn the camera.
 #[derive(Debug, Default)]
-pub struct Steadiness(Mutex<Option<(Instant, bool)>>);
+pub struct Sensed(Mutex<Option<Reading>>);
 
-impl Steadiness {
-    fn report(&self, settled: bool) {
-        *self.0.lock().unwrap_or_else(|poisoned| poisoned.into_inner()) = Some((Instant::now(), settled));
+#[derive(Clone, Copy, Debug)]
+struct Reading {
+    at: Instant,
+    settled: bool,
+    body: Option<BodyAngles>,
+}
+
+impl Sensed {
+    fn report(&self, settled: bool, body: Option<BodyAngles>) {
+        let reading = Reading { at: Instant::now(), settled, body };
+        *self.0.lock().unwrap_or_else(|poisoned| poisoned.into_inner()) = Some(reading);
+    }
+
+    fn fresh(&self) -> Option<Reading> {
+        let last = *self.0.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+        last.filter(|reading| reading.at.elapsed() < SENSORS_FRESH)
     }
 
     /// `Some(settled)` from fresh sensor data, `None` when there is none.
-    pub fn now(&self) -> Option<bool> {
-        let last = *self.0.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
-        last.filter(|(at, _)| at.elapsed() < SENSORS_FRESH).map(|(_, settled)| settled)
+    pub fn settled(&self) -> Option<bool> {
+        self.fresh().map(|reading| reading.settled)
+    }
+
+    /// The body angles from fresh sensor data, when it carried the head joints.
+    pub fn body_angles(&self) -> Option<BodyAngles> {
+        self.fresh().and_then(|reading| reading.body)
     }
 }
 
@@ -201,11 +220,11 @@ fn take_sample(
     state: &LolaState,
     started: Instant,
     detector: &mut PostureDetector,
-    steadiness: &Steadiness,
+    sensed: &Sensed,
     triggers: &Triggers,
 ) {
     let event = detector.update(started.elapsed().as_secs_f64(), state);
-    steadiness.report(detector.is_settled());
+    sensed.report(detector.is_settled(), state.body_angles());
     if let Some(event) = event {
         let kind = match event {
             PostureEvent::Fall => TriggerKind::Fall,
@@ -220,7 +239,7 @@ pub async fn sensor_datagrams(
     socket: Datagram,
     limit: usize,
     mut detector: PostureDetector,
-    steadiness: Arc<Steadiness>,
+    sensed: Arc<Sensed>,
     triggers: Triggers,
     status: Arc<Status>,
 ) {
@@ -234,7 +253,7 @@ pub async fn sensor_datagrams(
             Err(oversized) => Err(oversized.to_string()),
         };
         match parsed {
-            Ok(state) => take_sample(&state, started, &mut detector, &steadiness, &triggers),
+            Ok(state) => take_sample(&state, started, &mut detector, &sensed, &triggers),
             Err(error) => {
                 status.update(|report| report.rejected.sensors += 1);
                 rejects.log("sensor message", &error);
@@ -247,7 +266,7 @@ pub async fn sensor_datagrams(
 pub async fn lola_stream(
     path: PathBuf,
     mut detector: PostureDetector,
-    steadiness: Arc<Steadiness>,
+    sensed: Arc<Sensed>,
     triggers: Triggers,
     status: Arc<Status>,
 ) {
@@ -267,7 +286,7 @@ pub async fn lola_stream(
                     buffer.extend_from_slice(&chunk[..length]);
                     while let Some(length) = next_msgpack_value(&buffer) {
                         match LolaState::from_msgpack(&buffer[..length]) {
-                            Ok(state) => take_sample(&state, started, &mut detector, &steadiness, &triggers),
+                            Ok(state) => take_sample(&state, started, &mut detector, &sensed, &triggers),
                             Err(error) => {
                                 status.update(|report| report.rejected.sensors += 1);
                                 rejects.log("LoLA message", &error);

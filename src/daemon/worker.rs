@@ -14,7 +14,7 @@ use super::publish::Publisher;
 use super::queue::TriggerQueue;
 use super::source::{CaptureRequest, FrameSource, sleep_unless_stopped, unix_now};
 use super::status::Status;
-use super::triggers::{Steadiness, TriggerEvent};
+use super::triggers::{Sensed, TriggerEvent};
 use crate::geometry::{CameraIntrinsics, FieldPose};
 use crate::protocol::message::{
     FrameCounts, Hypothesis, Latency, Message, ModelInfo, SCHEMA_VERSION, Trigger, TriggerKind,
@@ -35,12 +35,12 @@ pub struct Worker {
     pub publisher: Publisher,
     /// Burst size and timing.
     pub burst: BurstConfig,
-    /// The camera pose (and head yaw) assumed when neither frame nor trigger gives one.
+    /// The camera's mounting (and the head yaw assumed when neither frame, trigger nor sensors give one).
     pub camera: CameraConfig,
     /// Verifies and refines hypotheses against the field lines; `None` when refinement is off.
     pub refiner: Option<LineRefiner>,
-    /// Whether the robot stands still, from the sensor task.
-    pub steadiness: Arc<Steadiness>,
+    /// What the sensor task last saw: steadiness and the body angles that turn the camera.
+    pub sensed: Arc<Sensed>,
     /// Counters.
     pub status: Arc<Status>,
     /// Set on shutdown.
@@ -118,7 +118,7 @@ impl Worker {
     fn settle(&self) {
         let deadline = Instant::now() + Duration::from_millis(self.burst.settle_timeout_ms);
         while Instant::now() < deadline && !self.stop.load(Ordering::Relaxed) {
-            if self.steadiness.now() != Some(false) {
+            if self.sensed.settled() != Some(false) {
                 return;
             }
             std::thread::sleep(SETTLE_POLL);
@@ -132,11 +132,7 @@ impl Worker {
     /// One burst for `batch`, as a message.
     fn relocalise(&mut self, seq: u64, batch: &[TriggerEvent]) -> Message {
         let contract = self.relocaliser.model().contract();
-        let head_yaw = batch
-            .iter()
-            .rev()
-            .find_map(|trigger| trigger.head_yaw)
-            .unwrap_or(self.camera.head_yaw_deg.to_radians());
+        let head_yaw = batch.iter().rev().find_map(|trigger| trigger.head_yaw);
         let penalty_return = batch.iter().any(|trigger| trigger.kind == TriggerKind::PenaltyReturn);
         let mut message = Message {
             schema: SCHEMA_VERSION,
@@ -193,7 +189,7 @@ impl Worker {
     /// Captures, relocalises and fuses into `message`; the failure reason otherwise.
     fn estimate(
         &mut self,
-        head_yaw: f64,
+        head_yaw: Option<f64>,
         penalty_return: bool,
         times: &mut BurstTimes,
         message: &mut Message,
@@ -210,14 +206,19 @@ impl Worker {
         let mut errors = Vec::new();
         let mut first_taken = None;
         let mut truth = None;
-        let (relocaliser, refiner, assumed_camera) = (&self.relocaliser, &self.refiner, &self.camera);
+        let (relocaliser, refiner, mounting, sensed) =
+            (&self.relocaliser, &self.refiner, &self.camera, &self.sensed);
         let captured = self.source.capture(&request, &mut |captured| {
             first_taken.get_or_insert(captured.taken);
             truth = truth.or(captured.truth);
-            let yaw = captured.camera.map_or(head_yaw, |camera| camera.head_yaw());
+            let body = sensed.body_angles();
+            let camera = captured.camera.map_or_else(|| mounting.pose_on(body, head_yaw), Ok);
+            let yaw = match &camera {
+                Ok(camera) => camera.head_yaw(),
+                Err(_) => head_yaw.unwrap_or(mounting.head_yaw_deg.to_radians()),
+            };
             if let Some(refiner) = refiner {
                 let lines = Instant::now();
-                let camera = captured.camera.map_or_else(|| assumed_camera.assumed_pose(yaw), Ok);
                 match camera.map_err(|e| e.to_string()).and_then(|camera| {
                     refiner
                         .percepts(&captured.frame, &CameraIntrinsics::nao_top(), &camera)

@@ -2,7 +2,7 @@
 //! top camera sits relative to the robot. Folded poses live in [`super::symmetry`] and cannot be mixed
 //! with either: converting between them goes through `fold`/`unfold`.
 
-use nalgebra::{Point2, Vector2};
+use nalgebra::{Point2, Rotation3, Vector2, Vector3};
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
@@ -199,6 +199,43 @@ impl CameraPose {
     pub fn mirrored(&self) -> Self {
         Self { roll: -self.roll, head_yaw: -self.head_yaw, ..*self }
     }
+
+    /// The same camera turned to `head_yaw` radians.
+    pub fn with_head_yaw(&self, head_yaw: f64) -> Result<Self, PoseError> {
+        Self::new(self.height, self.pitch, self.roll, head_yaw)
+    }
+
+    /// This camera as mounted (its pose with the torso upright and the head at zero) on a body at
+    /// `body`: torso, head yaw, head pitch and mounting rotate in that order, and the result is read
+    /// back as yaw, pitch and roll over the ground. The height stays the mounted one (the neck's few
+    /// centimetres of travel are left out).
+    pub fn on_body(&self, body: &BodyAngles) -> Result<Self, PoseError> {
+        finite("torso_roll", body.torso_roll)?;
+        finite("torso_pitch", body.torso_pitch)?;
+        finite("head_yaw", body.head_yaw)?;
+        finite("head_pitch", body.head_pitch)?;
+        let rotation = Rotation3::from_euler_angles(body.torso_roll, body.torso_pitch, 0.0)
+            * Rotation3::from_axis_angle(&Vector3::z_axis(), self.head_yaw + body.head_yaw)
+            * Rotation3::from_axis_angle(&Vector3::y_axis(), self.pitch + body.head_pitch)
+            * Rotation3::from_axis_angle(&Vector3::x_axis(), self.roll);
+        let (roll, pitch, yaw) = rotation.euler_angles();
+        Self::new(self.height, pitch, roll, yaw)
+    }
+}
+
+/// The body angles that turn the camera, as LoLA reports them, radians: torso roll and pitch over the
+/// ground from the IMU (positive pitch leans forward), head yaw (positive turns left) and head pitch
+/// (positive looks down) from the joints.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct BodyAngles {
+    /// Torso roll about the forward axis (right-handed: positive lowers the right shoulder).
+    pub torso_roll: f64,
+    /// Torso pitch; positive leans forward.
+    pub torso_pitch: f64,
+    /// HeadYaw joint; positive turns left.
+    pub head_yaw: f64,
+    /// HeadPitch joint; positive looks down.
+    pub head_pitch: f64,
 }
 
 impl Default for CameraPose {
@@ -226,6 +263,53 @@ mod tests {
     use super::*;
     use approx::assert_abs_diff_eq;
     use std::f64::consts::{FRAC_PI_2, PI};
+
+    #[test]
+    fn a_camera_on_an_upright_body_adds_the_head_angles() {
+        let mounted = CameraPose::STANDING;
+        let body = BodyAngles { head_yaw: 0.4, head_pitch: 0.3, ..BodyAngles::default() };
+        let pose = mounted.on_body(&body).unwrap();
+        assert_abs_diff_eq!(pose.pitch(), mounted.pitch() + 0.3, epsilon = 1e-12);
+        assert_abs_diff_eq!(pose.head_yaw(), 0.4, epsilon = 1e-12);
+        assert_abs_diff_eq!(pose.roll(), 0.0, epsilon = 1e-12);
+        assert_eq!(pose.height(), mounted.height());
+        assert_eq!(mounted.on_body(&BodyAngles::default()).unwrap(), mounted);
+    }
+
+    #[test]
+    fn a_leaning_torso_tilts_the_camera_by_where_the_head_looks() {
+        let mounted = CameraPose::new(0.5, 0.0, 0.0, 0.0).unwrap();
+        let lean = BodyAngles { torso_pitch: 0.1, ..BodyAngles::default() };
+        // Looking ahead, a forward lean is a downward look ...
+        let ahead = mounted.on_body(&lean).unwrap();
+        assert_abs_diff_eq!(
+            Vector2::new(ahead.pitch(), ahead.roll()),
+            Vector2::new(0.1, 0.0),
+            epsilon = 1e-12
+        );
+        // ... looking to the left, it is a roll: the camera's left side, towards the robot's back, rises.
+        let left = mounted.on_body(&BodyAngles { head_yaw: FRAC_PI_2, ..lean }).unwrap();
+        assert_abs_diff_eq!(left.pitch(), 0.0, epsilon = 1e-12);
+        assert_abs_diff_eq!(left.roll(), 0.1, epsilon = 1e-12);
+        assert_abs_diff_eq!(left.head_yaw(), FRAC_PI_2, epsilon = 1e-12);
+        // A torso rolled to the right rolls a camera looking ahead alike.
+        let rolled = mounted.on_body(&BodyAngles { torso_roll: 0.05, ..BodyAngles::default() }).unwrap();
+        assert_abs_diff_eq!(
+            Vector2::new(rolled.pitch(), rolled.roll()),
+            Vector2::new(0.0, 0.05),
+            epsilon = 1e-12
+        );
+    }
+
+    #[test]
+    fn broken_body_angles_are_errors() {
+        let nan = BodyAngles { head_pitch: f64::NAN, ..BodyAngles::default() };
+        let error = CameraPose::STANDING.on_body(&nan).unwrap_err().to_string();
+        assert!(error.contains("head_pitch"), "{error}");
+        // Lying face down, the camera looks past the vertical: no ground-plane camera pose.
+        let lying = BodyAngles { torso_pitch: 1.6, ..BodyAngles::default() };
+        assert!(matches!(CameraPose::STANDING.on_body(&lying), Err(PoseError::OutOfRange { .. })));
+    }
 
     #[test]
     fn field_pose_normalises_heading() {

@@ -3,6 +3,8 @@
 use serde::Deserialize;
 use thiserror::Error;
 
+use crate::geometry::BodyAngles;
+
 /// The part of a LoLA state message (msgpack map, 83 Hz) the detector reads; other keys are ignored.
 #[derive(Clone, Debug, PartialEq, Deserialize)]
 pub struct LolaState {
@@ -15,6 +17,10 @@ pub struct LolaState {
     /// Foot pressure, kg: left foot front-left, front-right, rear-left, rear-right, then the right foot.
     #[serde(rename = "FSR")]
     pub fsr: [f32; 8],
+    /// Joint angles in LoLA's order (HeadYaw, HeadPitch, then arms and legs), radians; empty when the
+    /// sender leaves them out.
+    #[serde(rename = "Position", default)]
+    pub position: Vec<f32>,
 }
 
 /// Why bytes are not a LoLA state message.
@@ -26,6 +32,17 @@ impl LolaState {
     /// Decodes one msgpack message.
     pub fn from_msgpack(bytes: &[u8]) -> Result<Self, SensorError> {
         Ok(rmp_serde::from_slice(bytes)?)
+    }
+
+    /// The body angles that turn the camera, when the message carries the head joints.
+    pub fn body_angles(&self) -> Option<BodyAngles> {
+        let (&head_yaw, &head_pitch) = (self.position.first()?, self.position.get(1)?);
+        Some(BodyAngles {
+            torso_roll: self.angles[0].into(),
+            torso_pitch: self.angles[1].into(),
+            head_yaw: head_yaw.into(),
+            head_pitch: head_pitch.into(),
+        })
     }
 }
 
@@ -51,11 +68,26 @@ mod tests {
         let state = LolaState::from_msgpack(&bytes).unwrap();
         assert_eq!(state.angles, [0.1, 0.2]);
         assert_eq!(state.fsr, [0.5; 8]);
+        assert_eq!(state.body_angles(), None, "no joint positions, no head angles");
         assert!(LolaState::from_msgpack(&bytes[..bytes.len() / 2]).is_err());
         assert!(LolaState::from_msgpack(b"\xc1garbage").is_err());
         let short =
             rmp_serde::to_vec_named(&serde_json::json!({"Angles": [0.1], "Gyroscope": [0, 0, 0]})).unwrap();
         let error = LolaState::from_msgpack(&short).unwrap_err().to_string();
         assert!(error.contains("LoLA state"), "{error}");
+    }
+
+    #[test]
+    fn the_head_joints_and_the_torso_angles_give_the_body_angles() {
+        let mut position = vec![0.0f32; 25];
+        position[..2].copy_from_slice(&[0.5, -0.25]);
+        let message = serde_json::json!({"Angles": [0.125, 0.0625], "Gyroscope": [0, 0, 0], "FSR": vec![1.0; 8],
+            "Position": position});
+        let state = LolaState::from_msgpack(&rmp_serde::to_vec_named(&message).unwrap()).unwrap();
+        let body = BodyAngles { torso_roll: 0.125, torso_pitch: 0.0625, head_yaw: 0.5, head_pitch: -0.25 };
+        assert_eq!(state.body_angles(), Some(body));
+        let one_joint = serde_json::json!({"Angles": [0, 0], "Gyroscope": [0, 0, 0], "FSR": vec![1.0; 8], "Position": [0.5]});
+        let state = LolaState::from_msgpack(&rmp_serde::to_vec_named(&one_joint).unwrap()).unwrap();
+        assert_eq!(state.body_angles(), None);
     }
 }

@@ -115,11 +115,22 @@ impl Daemon {
 
     /// Sends LoLA state messages at 100 Hz for `seconds`.
     pub fn send_sensors(&self, seconds: f64, angles: [f32; 2], fsr: f32) {
+        self.send_state(seconds, &sensor_state(angles, fsr));
+    }
+
+    /// Sends LoLA state messages of a robot standing still with its head at `head` (HeadYaw,
+    /// HeadPitch; radians) at 100 Hz for `seconds`.
+    pub fn send_sensors_with_head(&self, seconds: f64, head: [f32; 2]) {
+        let mut state = sensor_state([0.0, 0.0], 1.3);
+        let mut joints = [0.0f32; 25];
+        joints[..2].copy_from_slice(&head);
+        state["Position"] = serde_json::json!(joints);
+        self.send_state(seconds, &state);
+    }
+
+    fn send_state(&self, seconds: f64, state: &serde_json::Value) {
         let socket = UnixDatagram::unbound().unwrap();
-        let state = serde_json::json!({
-            "Angles": angles, "Gyroscope": [0.0, 0.0, 0.0], "FSR": vec![fsr; 8], "Battery": [1.0, 0.0, 0.0, 0.0],
-        });
-        let bytes = rmp_serde::to_vec_named(&state).unwrap();
+        let bytes = rmp_serde::to_vec_named(state).unwrap();
         for _ in 0..(seconds * 100.0) as usize {
             socket.send_to(&bytes, self.socket("sensors")).unwrap();
             std::thread::sleep(Duration::from_millis(10));
@@ -189,5 +200,12 @@ pub fn stream_frames(mut stream: UnixStream, frame: Vec<u8>, count: usize, gap: 
             }
             std::thread::sleep(gap);
         }
+    })
+}
+
+/// A LoLA state message (the keys relocd reads, and one it does not).
+fn sensor_state(angles: [f32; 2], fsr: f32) -> serde_json::Value {
+    serde_json::json!({
+        "Angles": angles, "Gyroscope": [0.0, 0.0, 0.0], "FSR": vec![fsr; 8], "Battery": [1.0, 0.0, 0.0, 0.0],
     })
 }

@@ -234,6 +234,42 @@ fn forwarded_frames_are_used_and_a_lying_header_is_dropped() {
 }
 
 #[test]
+fn the_head_yaw_the_sensors_report_turns_the_published_heading() {
+    let daemon = Daemon::start("frames:unix:{dir}/frames", &["--burst", "1", "--no-refine"]);
+    let image = sample_yuyv();
+    // Frames without a camera pose: relocd takes it from the sensors, or else from the config.
+    let header = FrameHeader { width: image.width(), height: image.height(), timestamp: 1.0, camera: None };
+    let frame = [&header.to_bytes()[..], image.as_bytes()].concat();
+    let stream = UnixStream::connect(daemon.socket("frames")).unwrap();
+    let sender = stream_frames(stream, frame, 80, Duration::from_millis(50));
+    std::thread::sleep(Duration::from_millis(200));
+    daemon.control(br#"{"relocalise": {}}"#);
+    let ahead = daemon.message();
+
+    let head_yaw = 0.5;
+    let turned = std::thread::scope(|scope| {
+        scope.spawn(|| daemon.send_sensors_with_head(1.5, [head_yaw as f32, 0.1]));
+        std::thread::sleep(Duration::from_millis(300));
+        daemon.control(br#"{"relocalise": {}}"#);
+        daemon.message()
+    });
+    assert!(ahead.failure.is_none() && turned.failure.is_none(), "{:?} {:?}", ahead.failure, turned.failure);
+    assert_eq!(ahead.hypotheses.len(), turned.hypotheses.len());
+    // The same image: the same camera heading, so the robot's heading is the head yaw less.
+    for hypothesis in &turned.hypotheses {
+        let twin = ahead
+            .hypotheses
+            .iter()
+            .find(|other| (other.x - hypothesis.x).hypot(other.y - hypothesis.y) < 1e-3);
+        let twin = twin.unwrap_or_else(|| panic!("{hypothesis:?} is not among {:?}", ahead.hypotheses));
+        let turn = relocd::geometry::normalize_angle(twin.theta - hypothesis.theta);
+        assert!((turn - head_yaw).abs() < 1e-3, "heading turned by {turn}, expected {head_yaw}");
+    }
+    sender.join().unwrap();
+    daemon.stop();
+}
+
+#[test]
 fn a_bad_config_is_refused_with_the_key() {
     let dir = tempfile::tempdir().unwrap();
     let config = dir.path().join("relocd.toml");
