@@ -8,7 +8,7 @@ use std::path::Path;
 
 use crate::daemon::config::Config;
 use crate::frame::{Frame, YuyvImage};
-use crate::geometry::CameraIntrinsics;
+use crate::geometry::{CameraIntrinsics, CameraPose};
 use crate::protocol::control::ControlRequest;
 use crate::protocol::frame_header::{FrameHeader, HEADER_SIZE};
 use crate::protocol::gamecontroller::GameControlData;
@@ -38,9 +38,12 @@ pub fn gamecontroller(bytes: &[u8]) {
     }
 }
 
-/// A forwarded LoLA state message (msgpack): decodes or errs, never panics.
+/// A forwarded LoLA state message (msgpack): decodes or errs, never panics; the body angles it carries
+/// turn the camera into a pose or an error.
 pub fn lola(bytes: &[u8]) {
-    let _ = LolaState::from_msgpack(bytes);
+    if let Some(body) = LolaState::from_msgpack(bytes).ok().and_then(|state| state.body_angles()) {
+        let _ = CameraPose::STANDING.on_body(&body);
+    }
 }
 
 /// A control request: a parsed request serialises to JSON that parses to the same request.
