@@ -1,8 +1,12 @@
 """Exports a trained network to ONNX with its contract in the metadata, quantises it to int8 (QDQ,
 calibrated on rendered frames) and writes a parity fixture of onnxruntime's outputs.
 
-    python models/export.py --run RUN_DIR --calibration DATA/val --name squeezenet-half-point \
-        --data-seed 1000 --data-frames 32000 [--keep-fp32]
+    python models/export.py --run RUN_DIR --calibration DATA/val [DATA/val-realism ...] \
+        --name squeezenet-half-point --data 1000:16000:black --data 1001:16000:hall-realism [--keep-fp32]
+
+--data names each training recording as SEED:FRAMES:KIND (KIND: black, asymmetric or hall-realism, the
+`relocd render` surroundings) for the contract; calibration frames are shared equally between the
+calibration recordings.
 
 Writes models/<name>.int8.onnx (and models/<name>.fp32.onnx with --keep-fp32), and
 models/fixtures/parity/<name>.json with onnxruntime's outputs for the checked-in parity frames.
@@ -23,7 +27,7 @@ from onnxruntime.quantization import QuantFormat, QuantType, quantize_static
 from onnxruntime.quantization.shape_inference import quant_pre_process
 from PIL import Image
 
-from relocnet.data import load_recording
+from relocnet.data import calibration_images
 from relocnet.nets import Exported, RelocNet, output_names
 from relocnet.onnxfile import MEAN, SCALE, STD, Frames, normalise, with_contract
 
@@ -56,12 +60,20 @@ def contract(args, log, representation, name, quantisation):
             "macs": log["macs"], "parameters": log["parameters"],
             "epochs": int(train_args["epochs"]), "seed": int(train_args["seed"]), "train_seconds": log["train_seconds"],
             "continued_from": log.get("continued_from"),
-            "data": {"renderer": "relocd render", "seed": args.data_seed, "frames": args.data_frames,
-                     "size": "160x120", "surroundings": "black"},
-            "calibration": {"recording": str(args.calibration.name), "frames": args.calibration_frames},
+            "data": [{"renderer": "relocd render", "seed": seed, "frames": frames, "size": "160x120",
+                      "surroundings": kind} for seed, frames, kind in args.data],
+            "calibration": {"recordings": [path.name for path in args.calibration], "frames": args.calibration_frames},
             "quantisation": quantisation,
         },
     }
+
+
+def data_set(text):
+    """Parses SEED:FRAMES:KIND."""
+    seed, frames, kind = text.split(":")
+    if kind not in ("black", "asymmetric", "hall-realism"):
+        raise argparse.ArgumentTypeError(f"unknown surroundings '{kind}' (black, asymmetric, hall-realism)")
+    return int(seed), int(frames), kind
 
 
 def last_gemm(path):
@@ -72,11 +84,11 @@ def last_gemm(path):
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--run", required=True, type=Path, help="training output directory (weights.pt, training.json)")
-    parser.add_argument("--calibration", required=True, type=Path, help="rendered recording for int8 calibration")
+    parser.add_argument("--calibration", required=True, type=Path, nargs="+", help="rendered recordings for int8 calibration")
     parser.add_argument("--calibration-frames", type=int, default=512)
     parser.add_argument("--name", required=True)
-    parser.add_argument("--data-seed", type=int, required=True)
-    parser.add_argument("--data-frames", type=int, required=True)
+    parser.add_argument("--data", required=True, type=data_set, action="append",
+                        help="a training recording as SEED:FRAMES:KIND, once per recording")
     parser.add_argument("--keep-fp32", action="store_true")
     args = parser.parse_args()
 
@@ -95,9 +107,9 @@ def main():
                           input_names=["image"], output_names=names, do_constant_folding=True)
         prepared = scratch / "prepared.onnx"
         quant_pre_process(str(fp32), str(prepared))
-        images, _ = load_recording(args.calibration)
+        images = calibration_images(args.calibration, args.calibration_frames)
         int8 = MODELS / f"{args.name}.int8.onnx"
-        quantize_static(str(prepared), str(int8), Frames(images[: args.calibration_frames]),
+        quantize_static(str(prepared), str(int8), Frames(images),
                         quant_format=QuantFormat.QDQ, per_channel=False, activation_type=QuantType.QUInt8,
                         weight_type=QuantType.QInt8, nodes_to_exclude=[last_gemm(prepared)])
         with_contract(int8, contract(args, log, representation, args.name,

@@ -31,7 +31,7 @@ from onnxruntime.quantization import QuantFormat, QuantType, quantize_static
 from onnxruntime.quantization.shape_inference import quant_pre_process
 from PIL import Image
 
-from relocnet.data import load_recording
+from relocnet.data import calibration_images
 from relocnet.onnxfile import Frames, normalise, read_contract, with_contract
 
 MODELS = Path(__file__).resolve().parent
@@ -147,7 +147,7 @@ def add_to_parity_fixture(stem, suffix, path, tolerance):
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--fp32", required=True, type=Path, help="NAME.fp32.onnx with its contract")
-    parser.add_argument("--calibration", type=Path, help="rendered recording for calibration (qoperator)")
+    parser.add_argument("--calibration", type=Path, nargs="+", help="rendered recordings for calibration (qoperator)")
     parser.add_argument("--calibration-frames", type=int, default=512)
     parser.add_argument("--form", action="append", choices=sorted(FORMS), required=True)
     args = parser.parse_args()
@@ -162,13 +162,13 @@ def main():
         else:
             if args.calibration is None:
                 raise SystemExit("--form qoperator needs --calibration")
-            images, _ = load_recording(args.calibration)
-            qoperator(args.fp32, out, images[: args.calibration_frames])
+            qoperator(args.fp32, out, calibration_images(args.calibration, args.calibration_frames))
         document = copy.deepcopy(contract)
         document["model_id"] = f"{stem}-{suffix}-v1"
         document["training"]["quantisation"] = description
         if form == "qoperator":
-            document["training"]["calibration"] = {"recording": args.calibration.name, "frames": args.calibration_frames}
+            document["training"]["calibration"] = {"recordings": [path.name for path in args.calibration],
+                                                   "frames": args.calibration_frames}
         with_contract(out, document)
         add_to_parity_fixture(stem, suffix, out, tolerance)
         print(f"{form}: {out} ({out.stat().st_size / 1e6:.2f} MB)")

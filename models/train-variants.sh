@@ -31,5 +31,5 @@ for name in "$@"; do
     --representation "$representation" --epochs "$epochs" --seed 1 --threads "$THREADS" \
     --out "$RUNS/$name" >"$RUNS/$name.log" 2>&1
   "$PY" export.py --run "$RUNS/$name" --calibration "$DATA/val" --name "$name" \
-    --data-seed 1000 --data-frames 32000 >>"$RUNS/$name.log" 2>&1
+    --data 1000:32000:black >>"$RUNS/$name.log" 2>&1
 done

@@ -1,7 +1,10 @@
 """Trains one relocalisation network on frames rendered by `relocd render`.
 
-    python models/train.py --train DATA/train --val DATA/val --arch squeezenet --width 0.5 \
-        --representation half-point --epochs 20 --seed 1 --out models/build/squeezenet-half-point
+    python models/train.py --train DATA/train [DATA/train-realism ...] --val DATA/val [...] \
+        --arch squeezenet --width 0.5 --representation half-point --epochs 20 --seed 1 \
+        --out models/build/squeezenet-half-point
+
+Several training (or validation) recordings are concatenated in the order given.
 
 Loss (no hand-tuned weights): a per-frame Gaussian negative log-likelihood for the position and a von
 Mises one for the heading, each with its own predicted uncertainty (Kendall & Gal 2017's heteroscedastic
@@ -21,7 +24,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from relocnet.data import load_recording
+from relocnet.data import load_recordings
 from relocnet.fold import fold, mirror_long_axis
 from relocnet.nets import RelocNet, count_macs, count_parameters
 
@@ -97,8 +100,8 @@ def evaluate(net, images, targets, bits, batch=256):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--train", required=True, type=Path)
-    parser.add_argument("--val", required=True, type=Path)
+    parser.add_argument("--train", required=True, type=Path, nargs="+", help="training recordings (concatenated)")
+    parser.add_argument("--val", required=True, type=Path, nargs="+", help="validation recordings (concatenated)")
     parser.add_argument("--arch", choices=["squeezenet", "alexnet"], default="squeezenet")
     parser.add_argument("--width", type=float, default=0.5)
     parser.add_argument("--representation", default="half-point")
@@ -108,7 +111,7 @@ def main():
     parser.add_argument("--weight-decay", type=float, default=1e-4)
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--threads", type=int, default=2)
-    parser.add_argument("--limit", type=int, default=0, help="use only the first N training frames (0: all)")
+    parser.add_argument("--limit", type=int, default=0, help="use only the first N frames of each training recording (0: all)")
     parser.add_argument("--init", type=Path, help="continue from this run directory's weights.pt (a new schedule)")
     parser.add_argument("--out", required=True, type=Path)
     args = parser.parse_args()
@@ -119,10 +122,8 @@ def main():
     generator = torch.Generator().manual_seed(args.seed)
     args.out.mkdir(parents=True, exist_ok=True)
 
-    train_images, train_poses = load_recording(args.train)
-    if args.limit:
-        train_images, train_poses = train_images[: args.limit], train_poses[: args.limit]
-    val_images, val_poses = load_recording(args.val)
+    train_images, train_poses = load_recordings(args.train, args.limit)
+    val_images, val_poses = load_recordings(args.val)
     train_images = torch.from_numpy(train_images)
     targets = [folded_targets(train_poses, args.representation, flipped) for flipped in (False, True)]
     val_targets, val_bits = folded_targets(val_poses, args.representation, False)

@@ -31,3 +31,19 @@ def load_recording(directory, width=160, height=120):
         poses[i] = (pose["x"], pose["y"], pose["theta"])
     np.savez(cache, images=images, poses=poses)
     return images, poses
+
+
+def load_recordings(directories, limit=0, width=160, height=120):
+    """Like `load_recording`, for several recordings concatenated in the order given; `limit` > 0 keeps
+    only the first `limit` frames of each."""
+    loaded = [load_recording(directory, width, height) for directory in directories]
+    end = limit or None
+    return (np.concatenate([images[:end] for images, _ in loaded]),
+            np.concatenate([poses[:end] for _, poses in loaded]))
+
+
+def calibration_images(directories, count):
+    """The first `count` frames for int8 calibration, an equal share from each recording (in order)."""
+    share = -(-count // len(directories))
+    images = [load_recording(directory)[0][:share] for directory in directories]
+    return np.concatenate(images)[:count]
