@@ -70,6 +70,9 @@ pub struct FramePercepts {
     /// Top of the carpet (continuous row) at each vertical scan line; the image height where a column
     /// shows no carpet.
     carpet_top: Vec<f64>,
+    /// Whether each grid sample (vertical scan line × every `scan_spacing`-th row, column-major) shows
+    /// something that is neither carpet nor line: a robot, a ball, the hall, a deep shadow.
+    hidden: Vec<bool>,
     scan_spacing: usize,
 }
 
@@ -90,7 +93,7 @@ impl FramePercepts {
     }
 
     /// Whether a line at `pixel` would have been searched for: inside the image, away from its edges,
-    /// and on the carpet (below the field border of its column).
+    /// on the carpet (below the field border of its column) and not hidden by anything standing on it.
     pub fn searched(&self, pixel: &Point2<f64>) -> bool {
         let intrinsics = self.camera.intrinsics();
         let margin = self.scan_spacing as f64;
@@ -104,7 +107,17 @@ impl FramePercepts {
         let column = (pixel.x / self.scan_spacing as f64 - 0.5).max(0.0);
         let left = (column.floor() as usize).min(self.carpet_top.len() - 1);
         let right = (left + 1).min(self.carpet_top.len() - 1);
-        pixel.y > self.carpet_top[left].max(self.carpet_top[right]) + margin
+        pixel.y > self.carpet_top[left].max(self.carpet_top[right]) + margin && !self.hidden_at(pixel)
+    }
+
+    /// Whether the grid sample nearest to `pixel` shows neither carpet nor line.
+    fn hidden_at(&self, pixel: &Point2<f64>) -> bool {
+        let rows = self.hidden.len() / self.carpet_top.len();
+        let nearest = |value: f64, count: usize| {
+            ((value / self.scan_spacing as f64 - 0.5).round().max(0.0) as usize).min(count.saturating_sub(1))
+        };
+        let (column, row) = (nearest(pixel.x, self.carpet_top.len()), nearest(pixel.y, rows));
+        self.hidden.get(column * rows + row).copied().unwrap_or(true)
     }
 }
 
@@ -201,6 +214,7 @@ pub fn detect(
                 camera,
                 camera_height: camera_pose.height(),
                 carpet_top: vec![height as f64],
+                hidden: Vec::new(),
                 scan_spacing,
             });
         }
@@ -210,6 +224,7 @@ pub fn detect(
     let rows: Vec<usize> = (scan_spacing / 2..height).step_by(scan_spacing).collect();
     let mut points = Vec::new();
     let mut carpet_top = Vec::with_capacity(columns.len());
+    let mut hidden = Vec::with_capacity(columns.len() * rows.len());
     let mut classes = Vec::with_capacity(width.max(height));
     let accept = |start: Point2<f64>, end: Point2<f64>, points: &mut Vec<LinePoint>, top: f64| {
         if let Some(point) = line_point(&camera, start, end, top, line_width) {
@@ -221,6 +236,7 @@ pub fn detect(
         classes.extend((0..height).map(|row| palette.classify(pixels.yuv(column, row))));
         let top = carpet_start(&classes).map_or(height as f64, |row| row as f64);
         carpet_top.push(top);
+        hidden.extend(rows.iter().map(|&row| classes[row] == Class::Other));
         let u = column as f64 + 0.5;
         for (start, end) in line_runs(&classes) {
             accept(Point2::new(u, start as f64), Point2::new(u, end as f64), &mut points, top);
@@ -248,6 +264,7 @@ pub fn detect(
         camera,
         camera_height: camera_pose.height(),
         carpet_top,
+        hidden,
         scan_spacing,
     })
 }
