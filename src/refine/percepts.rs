@@ -410,6 +410,22 @@ mod tests {
     }
 
     #[test]
+    fn what_stands_on_the_carpet_hides_the_lines_behind_it() {
+        use image::{Rgb, RgbImage};
+        // Carpet to the top of the image, a grey robot standing in its lower middle.
+        let frame = Frame::Rgb(RgbImage::from_fn(640, 480, |x, y| {
+            let robot = (280..360).contains(&x) && (300..420).contains(&y);
+            Rgb(if robot { [128, 128, 128] } else { [60, 130, 50] })
+        }));
+        let camera = CameraPose::new(0.5, 0.3, 0.0, 0.0).unwrap();
+        let percepts = detect(&frame, &CameraIntrinsics::nao_top(), &camera, 0.05).unwrap();
+        assert!(percepts.points.is_empty());
+        assert!(percepts.searched(&Point2::new(100.0, 360.0)), "open carpet");
+        assert!(!percepts.searched(&Point2::new(320.0, 360.0)), "behind the robot");
+        assert!(!percepts.searched(&Point2::new(320.0, 2.0)), "at the image edge");
+    }
+
+    #[test]
     fn carpet_starts_at_the_first_green_run() {
         use Class::{Bright as B, Green as G, Other as O};
         assert_eq!(carpet_start(&[O, G, O, G, G, G, G, B]), Some(3));
