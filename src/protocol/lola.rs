@@ -1,11 +1,12 @@
-//! LoLA sensor messages: the part of the state map (msgpack, 83 Hz) that fall and pick-up detection reads.
+//! LoLA sensor messages: the part of the state map (msgpack, 83 Hz) that fall and pick-up detection and
+//! the camera pose read.
 
 use serde::Deserialize;
 use thiserror::Error;
 
 use crate::geometry::BodyAngles;
 
-/// The part of a LoLA state message (msgpack map, 83 Hz) the detector reads; other keys are ignored.
+/// The part of a LoLA state message (msgpack map, 83 Hz) relocd reads; other keys are ignored.
 #[derive(Clone, Debug, PartialEq, Deserialize)]
 pub struct LolaState {
     /// Torso angles about x (roll) and y (pitch), radians.
