@@ -18,7 +18,7 @@ use relocd::recording::Recording;
 use crate::harness::{Daemon, PLAYER, TEAM, sample, sample_yuyv, stream_frames};
 
 /// How far the burst's best hypothesis may lie from the rendered robot (the model's median is
-/// ~0.45 m per frame, 0.25 m for penalty-return bursts).
+/// ~0.4 m per frame, 0.25 m for penalty-return bursts).
 const ACCEPTED_ERROR_M: f64 = 1.0;
 
 /// Renders a burst of five frames of a robot put back after a penalty; returns its true pose.
