@@ -48,7 +48,7 @@ def contract(args, log, representation, name, quantisation):
     train_args = log["args"]
     return {
         "contract_version": 1,
-        "model_id": f"{name}-{quantisation.split()[0]}-v1",
+        "model_id": f"{name}-{quantisation.split()[0]}-v{args.version}",
         "representation": representation,
         "input": {"name": "image", "shape": [1, 3, 120, 160], "layout": "NCHW", "colour": "RGB",
                   "scale": SCALE, "mean": MEAN, "std": STD},
@@ -89,6 +89,7 @@ def main():
     parser.add_argument("--name", required=True)
     parser.add_argument("--data", required=True, type=data_set, action="append",
                         help="a training recording as SEED:FRAMES:KIND, once per recording")
+    parser.add_argument("--version", type=int, default=1, help="model version, in the model id (raise it on every retrain)")
     parser.add_argument("--keep-fp32", action="store_true")
     args = parser.parse_args()
 

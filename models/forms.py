@@ -164,7 +164,7 @@ def main():
                 raise SystemExit("--form qoperator needs --calibration")
             qoperator(args.fp32, out, calibration_images(args.calibration, args.calibration_frames))
         document = copy.deepcopy(contract)
-        document["model_id"] = f"{stem}-{suffix}-v1"
+        document["model_id"] = f"{stem}-{suffix}-v{contract['model_id'].rsplit('-v', 1)[1]}"
         document["training"]["quantisation"] = description
         if form == "qoperator":
             document["training"]["calibration"] = {"recordings": [path.name for path in args.calibration],
