@@ -200,11 +200,6 @@ impl CameraPose {
         Self { roll: -self.roll, head_yaw: -self.head_yaw, ..*self }
     }
 
-    /// The same camera turned to `head_yaw` radians.
-    pub fn with_head_yaw(&self, head_yaw: f64) -> Result<Self, PoseError> {
-        Self::new(self.height, self.pitch, self.roll, head_yaw)
-    }
-
     /// This camera as mounted (its pose with the torso upright and the head at zero) on a body at
     /// `body`: torso, head yaw, head pitch and mounting rotate in that order, and the result is read
     /// back as yaw, pitch and roll over the ground. The height stays the mounted one (the neck's few
