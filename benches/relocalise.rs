@@ -9,8 +9,9 @@ use std::path::Path;
 use criterion::{Criterion, criterion_group, criterion_main};
 use relocd::frame::{Frame, YuyvImage};
 use relocd::geometry::{Camera, CameraIntrinsics, CameraPose, FieldModel};
+use relocd::pipeline;
 use relocd::refine::LineRefiner;
-use relocd::relocaliser::{Model, Prediction, Relocaliser, default_model, fuse, preprocess};
+use relocd::relocaliser::{Model, Prediction, Relocaliser, default_model, preprocess};
 use relocd::sim::{Randomisation, render};
 
 fn camera_frame() -> (Frame, CameraPose) {
@@ -65,17 +66,17 @@ fn stages(criterion: &mut Criterion) {
     });
     let prediction = Prediction::decode(&raw, representation, 0.0).unwrap();
     let burst = vec![prediction; 5];
-    group.bench_function("fuse_burst_of_5", |b| b.iter(|| fuse(&burst)));
+    group.bench_function("fuse_burst_of_5", |b| b.iter(|| pipeline::fuse(&burst)));
     let refiner = LineRefiner::new(&FieldModel::default());
     let intrinsics = CameraIntrinsics::nao_top();
     group.bench_function("line_points_yuyv_640x480", |b| {
         b.iter(|| refiner.percepts(&frame, &intrinsics, &camera_pose))
     });
     let percepts = refiner.percepts(&frame, &intrinsics, &camera_pose).unwrap();
-    let mut one = fuse(&burst[..1]).unwrap();
-    one.hypotheses.truncate(1);
+    let mut one = pipeline::fuse(&burst[..1]).unwrap().hypotheses;
+    one.truncate(1);
     group.bench_function("refine_one_hypothesis", |b| {
-        b.iter(|| refiner.refine(std::slice::from_ref(&percepts), &mut one.clone()))
+        b.iter(|| pipeline::verify(&refiner, std::slice::from_ref(&percepts), &mut one.clone()))
     });
     let relocaliser = Relocaliser::new(model);
     group.bench_function("whole_frame", |b| b.iter(|| relocaliser.relocalise(&frame, 0.0)));

@@ -11,8 +11,9 @@ use serde::Serialize;
 
 use crate::frame::{Frame, YuyvImage};
 use crate::geometry::{Camera, CameraIntrinsics, CameraPose, FieldModel};
+use crate::pipeline::{self, Pipeline};
 use crate::refine::LineRefiner;
-use crate::relocaliser::{Backend, Model, Prediction, Relocaliser, fuse, kernel_isa, preprocess};
+use crate::relocaliser::{Backend, Model, Prediction, kernel_isa, preprocess};
 use crate::sim::{Randomisation, render};
 
 /// Frames in the fused burst, as the daemon captures by default.
@@ -146,12 +147,13 @@ pub fn run(
     let prediction = Prediction::decode(&raw, representation, 0.0)?;
     let burst = vec![prediction.clone(); BURST];
     let refiner = LineRefiner::new(&FieldModel::new(model.contract().field.clone()));
-    let intrinsics = CameraIntrinsics::nao_top();
-    let percepts = refiner.percepts(&frame, &intrinsics, &camera_pose)?;
-    let mut heaviest = fuse(std::slice::from_ref(&prediction))?;
-    heaviest.hypotheses.truncate(1);
+    let intrinsics = model.contract().camera;
+    let percepts = [refiner.percepts(&frame, &intrinsics, &camera_pose)?];
+    let mut heaviest = pipeline::fuse(std::slice::from_ref(&prediction))?.hypotheses;
+    heaviest.truncate(1);
     let backend = model.backend();
-    let relocaliser = Relocaliser::new(model);
+    let pipeline = Pipeline::new(model);
+    let relocaliser = pipeline.relocaliser();
 
     let mut medians = StageMedians::default();
     for &stage in stages {
@@ -161,13 +163,13 @@ pub fn run(
             Stage::Unfold => median_ms(iterations, || {
                 drop(Prediction::decode(&raw, representation, 0.0).map(|prediction| prediction.hypotheses()))
             }),
-            Stage::Fusion => median_ms(iterations, || drop(fuse(&burst))),
+            Stage::Fusion => median_ms(iterations, || drop(pipeline::fuse(&burst))),
             Stage::Lines => {
                 median_ms(iterations, || drop(refiner.percepts(&frame, &intrinsics, &camera_pose)))
             }
-            Stage::Refine => median_ms(iterations, || {
-                refiner.refine(std::slice::from_ref(&percepts), &mut heaviest.clone())
-            }),
+            Stage::Refine => {
+                median_ms(iterations, || pipeline::verify(&refiner, &percepts, &mut heaviest.clone()))
+            }
             Stage::Total => median_ms(iterations, || drop(relocaliser.relocalise(&frame, 0.0))),
         };
         let slot = match stage {

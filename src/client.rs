@@ -28,7 +28,7 @@ use std::time::{Duration, Instant};
 
 use thiserror::Error;
 
-pub use crate::daemon::config::Target as Address;
+pub use crate::protocol::address::Address;
 use crate::protocol::control::{ControlRequest, RelocaliseRequest, StatusRequest};
 pub use crate::protocol::message::{Hypothesis, Message, MessageError, Trigger, TriggerKind};
 

@@ -12,13 +12,14 @@ use indicatif::{ProgressBar, ProgressStyle};
 use tracing::info;
 
 use relocd::bench::Stage;
-use relocd::daemon::config::{Config, Listen, SensorInput, SourceSpec, Target};
+use relocd::daemon::config::{Config, Listen, SensorInput, SourceSpec};
+use relocd::daemon::record::RecordOptions;
 use relocd::geometry::{CameraIntrinsics, FieldDimensions, FieldModel, Representation};
+use relocd::pipeline::{Pipeline, PlacementPrior};
+use relocd::protocol::address::Address;
 use relocd::protocol::message::Encoding;
-use relocd::record::RecordOptions;
 use relocd::recording::{FrameFormat, Recording};
-use relocd::refine::LineRefiner;
-use relocd::relocaliser::{self, Backend, LoadOptions, Model, PlacementPrior, Relocaliser};
+use relocd::relocaliser::{self, Backend, LoadOptions, Model};
 use relocd::replay::ReplayOptions;
 use relocd::sim::{DatasetSpec, Randomisation, render_dataset};
 
@@ -149,7 +150,7 @@ struct RunArgs {
     control: Option<Listen>,
     /// Publish target, udp:IP:PORT or unix:PATH; repeat for several (replaces the config's list).
     #[arg(long)]
-    publish: Vec<Target>,
+    publish: Vec<Address>,
     /// Message encoding: json or msgpack.
     #[arg(long)]
     encoding: Option<Encoding>,
@@ -411,7 +412,7 @@ fn record(args: RecordArgs) -> anyhow::Result<()> {
             .expect("valid progress template")
             .progress_chars("=> "),
     );
-    let summary = relocd::record::record(&options, |frames| progress.set_position(frames))?;
+    let summary = relocd::daemon::record::record(&options, |frames| progress.set_position(frames))?;
     progress.finish_and_clear();
     info!(frames = summary.frames, seconds = summary.seconds, rejected = summary.rejected, "recorded");
     println!(
@@ -558,23 +559,22 @@ fn replay(args: ReplayArgs) -> anyhow::Result<()> {
         frames = recording.records().len(),
         "replaying"
     );
-    let refiner = args.refine.then(|| LineRefiner::new(&FieldModel::new(contract.field.clone())));
-    let relocaliser = Relocaliser::new(model);
+    let field = FieldModel::new(contract.field.clone());
+    let pipeline = Pipeline::new(model);
+    let pipeline = if args.refine { pipeline.with_lines(&field) } else { pipeline };
     let stdout = std::io::stdout();
     let summary = relocd::replay::replay(
         &recording,
-        &relocaliser,
+        &pipeline,
         &ReplayOptions {
             burst: args.burst.into(),
             prior: args.prior.map(|PriorArg::PenaltyReturn| PlacementPrior::penalty_return()),
-            refiner: refiner.as_ref(),
         },
         &mut stdout.lock(),
     )
     .context("writing results")?;
     #[cfg(feature = "report")]
     if let Some(directory) = &args.report {
-        let field = FieldModel::new(relocaliser.model().contract().field.clone());
         let written =
             relocd::report::write_report(directory, &summary.evaluations, &field).context("--report")?;
         info!(plots = ?written, "report written");

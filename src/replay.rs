@@ -7,13 +7,11 @@ use serde::Serialize;
 use tracing::warn;
 
 use crate::eval::{BurstEvaluation, Evaluation, Metrics, RefinedEvaluation, Sample};
-use crate::frame::Frame;
-use crate::geometry::{CameraIntrinsics, FieldPose};
+use crate::geometry::{FieldPose, PoseSigma};
+use crate::pipeline::{BurstError, Estimate, Pipeline, PlacementPrior};
+use crate::protocol::message::LineEvidence;
 use crate::recording::{FrameRecord, Recording};
-use crate::refine::{FramePercepts, LineEvidence, LineRefiner};
-use crate::relocaliser::{
-    BurstEstimate, PlacementPrior, PoseSigma, Relocalisation, Relocaliser, Timings, fuse,
-};
+use crate::relocaliser::{Relocalisation, Timings};
 
 /// A pose on the wire: metres and radians.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
@@ -77,7 +75,7 @@ pub struct BurstReport {
 }
 
 impl BurstReport {
-    fn new(records: &[FrameRecord], estimate: Result<&BurstEstimate, String>) -> Self {
+    fn new(records: &[FrameRecord], estimate: Result<&Estimate, &BurstError>) -> Self {
         let (hypotheses, agreeing, error) = match estimate {
             Ok(estimate) => (
                 Some(
@@ -88,14 +86,14 @@ impl BurstReport {
                             pose: WirePose::from(&h.pose),
                             weight: h.weight,
                             sigma: h.sigma,
-                            lines: h.lines,
+                            lines: h.lines.map(Into::into),
                         })
                         .collect(),
                 ),
                 Some(estimate.agreeing),
                 None,
             ),
-            Err(error) => (None, None, Some(error)),
+            Err(error) => (None, None, Some(error.to_string())),
         };
         Self {
             burst: records.iter().map(|record| record.file.clone()).collect(),
@@ -194,41 +192,39 @@ pub struct ReplaySummary {
 
 /// How a replay treats consecutive frames.
 #[derive(Clone, Debug, Default)]
-pub struct ReplayOptions<'a> {
+pub struct ReplayOptions {
     /// Frames per standing robot; above 1, every `burst` consecutive frames are fused.
     pub burst: usize,
     /// A game-context prior applied to every fused burst (bursts of one frame when `burst` is 1).
     pub prior: Option<PlacementPrior>,
-    /// Verify and refine every burst (bursts of one frame when `burst` is 1) against the field lines
-    /// its frames show; frames need their camera pose in the recording.
-    pub refiner: Option<&'a LineRefiner>,
 }
 
-/// Relocalises every frame of `recording`, writing one JSON line per frame to `out`; with bursts or a
-/// prior, every burst of consecutive frames (a standing robot) is also fused, re-weighted by the prior,
-/// and written as one more line. A frame that fails is reported and skipped; only a failing `out` stops
-/// the replay.
+/// Relocalises every frame of `recording` with `pipeline`, writing one JSON line per frame to `out`;
+/// with bursts, a prior or line checks, every burst of consecutive frames (a standing robot) also goes
+/// through the rest of the pipeline and is written as one more line (frames need their camera pose in
+/// the recording for the line checks). A frame that fails is reported and skipped; only a failing
+/// `out` stops the replay.
 pub fn replay(
     recording: &Recording,
-    relocaliser: &Relocaliser,
+    pipeline: &Pipeline,
     options: &ReplayOptions,
     out: &mut impl Write,
 ) -> std::io::Result<ReplaySummary> {
-    let burst = options.burst.max(1);
+    let burst_size = options.burst.max(1);
     let mut evaluations = Vec::new();
     let mut burst_evaluations = Vec::new();
     let mut refined_evaluations = Vec::new();
     let mut failed = 0;
-    for group in recording.records().chunks(burst) {
-        let mut predictions = Vec::with_capacity(group.len());
-        let mut percepts = Vec::new();
+    for group in recording.records().chunks(burst_size) {
+        let mut burst = pipeline.burst();
         for record in group {
+            let _frame = tracing::warn_span!("frame", file = %record.file).entered();
             let head_yaw = record.camera.map_or(0.0, |camera| camera.head_yaw());
+            if pipeline.checks_lines() && record.camera.is_none() {
+                warn!("no camera pose recorded: frame not used for line refinement");
+            }
             let result = recording.load_frame(record).map_err(|error| error.to_string()).and_then(|frame| {
-                if let Some(refiner) = options.refiner {
-                    percepts.extend(frame_percepts(refiner, record, &frame));
-                }
-                relocaliser.relocalise(&frame, head_yaw).map_err(|error| error.to_string())
+                burst.add(&frame, head_yaw, record.camera.as_ref()).map_err(|error| error.to_string())
             });
             let report = match result {
                 Ok(result) => {
@@ -237,39 +233,27 @@ pub fn replay(
                             Sample { truth, head_yaw, prediction: result.prediction.clone() }.evaluate(),
                         );
                     }
-                    let report = FrameReport::success(record, &result);
-                    predictions.push(result.prediction);
-                    report
+                    FrameReport::success(record, &result)
                 }
                 Err(error) => {
-                    warn!(file = %record.file, %error, "frame skipped");
+                    warn!(%error, "frame skipped");
                     failed += 1;
                     FrameReport::failure(record, error)
                 }
             };
             write_line(out, &report)?;
         }
-        if burst > 1 || options.prior.is_some() || options.refiner.is_some() {
-            let mut estimate = fuse(&predictions);
+        if burst_size > 1 || options.prior.is_some() || pipeline.checks_lines() {
+            let (estimate, _) = burst.finish(options.prior.as_ref());
             if let (Ok(estimate), Some(truth)) = (&estimate, group[0].pose) {
-                if burst > 1 || options.prior.is_some() {
-                    let mut unrefined = estimate.clone();
-                    if let Some(prior) = &options.prior {
-                        prior.apply(&mut unrefined.hypotheses);
-                    }
-                    burst_evaluations.push(BurstEvaluation::new(&truth, &unrefined));
+                if burst_size > 1 || options.prior.is_some() {
+                    burst_evaluations.push(BurstEvaluation::new(&truth, &estimate.network));
+                }
+                if pipeline.checks_lines() {
+                    refined_evaluations.push(RefinedEvaluation::new(&truth, &estimate.hypotheses));
                 }
             }
-            if let (Ok(estimate), Some(refiner)) = (&mut estimate, options.refiner) {
-                refiner.refine(&percepts, estimate);
-            }
-            if let (Ok(estimate), Some(prior)) = (&mut estimate, &options.prior) {
-                prior.apply(&mut estimate.hypotheses);
-            }
-            if let (Ok(estimate), Some(truth), Some(_)) = (&estimate, group[0].pose, options.refiner) {
-                refined_evaluations.push(RefinedEvaluation::new(&truth, estimate));
-            }
-            write_line(out, &BurstReport::new(group, estimate.as_ref().map_err(ToString::to_string)))?;
+            write_line(out, &BurstReport::new(group, estimate.as_ref()))?;
         }
     }
     Ok(ReplaySummary {
@@ -278,19 +262,6 @@ pub fn replay(
         metrics: Metrics::summarise(&evaluations, &burst_evaluations, &refined_evaluations),
         evaluations,
     })
-}
-
-/// The line points of one frame, or none (with a warning) when its camera pose is not recorded or the
-/// frame cannot be searched.
-fn frame_percepts(refiner: &LineRefiner, record: &FrameRecord, frame: &Frame) -> Option<FramePercepts> {
-    let Some(camera) = record.camera else {
-        warn!(file = %record.file, "no camera pose recorded: frame not used for line refinement");
-        return None;
-    };
-    refiner
-        .percepts(frame, &CameraIntrinsics::nao_top(), &camera)
-        .inspect_err(|error| warn!(file = %record.file, %error, "no line points"))
-        .ok()
 }
 
 fn write_line(out: &mut impl Write, value: &impl Serialize) -> std::io::Result<()> {

@@ -8,10 +8,10 @@
 
 use image::{Rgb, RgbImage};
 use relocd::frame::{Frame, YuyvImage};
-use relocd::geometry::{Camera, CameraIntrinsics, CameraPose, FieldModel, FieldPose, Symmetry};
+use relocd::geometry::{Camera, CameraIntrinsics, CameraPose, FieldModel, FieldPose, PoseSigma, Symmetry};
+use relocd::pipeline::{Hypothesis, verify};
 use relocd::refine::line_map::Primitive;
 use relocd::refine::{FramePercepts, LineCheck, LineRefiner, PerceptError};
-use relocd::relocaliser::{BurstEstimate, FusedHypothesis, PoseSigma};
 use relocd::sim::{Randomisation, SampledFrame, render};
 
 /// Seed of the frames rendered here: never used for training.
@@ -38,15 +38,8 @@ fn percepts(refiner: &LineRefiner, sampled: &SampledFrame, frame: &Frame) -> Fra
     refiner.percepts(frame, &CameraIntrinsics::nao_top(), &sampled.camera).unwrap()
 }
 
-fn estimate(hypotheses: &[(FieldPose, f64)], sigma: PoseSigma) -> BurstEstimate {
-    BurstEstimate {
-        hypotheses: hypotheses
-            .iter()
-            .map(|&(pose, weight)| FusedHypothesis { pose, weight, sigma, lines: None })
-            .collect(),
-        frames: 1,
-        agreeing: 1,
-    }
+fn hypotheses(weighted: &[(FieldPose, f64)], sigma: PoseSigma) -> Vec<Hypothesis> {
+    weighted.iter().map(|&(pose, weight)| Hypothesis { pose, weight, sigma, lines: None }).collect()
 }
 
 /// The CNN-like spread the refinement starts from.
@@ -139,9 +132,9 @@ fn refinement_recovers_perturbed_poses() {
             truth.heading() + 15f64.to_radians() * (index as f64 * 0.7).sin(),
         )
         .unwrap();
-        let mut estimate = estimate(&[(start, 1.0)], cnn_sigma());
-        refiner.refine(std::slice::from_ref(&percepts), &mut estimate);
-        let result = &estimate.hypotheses[0];
+        let mut estimate = hypotheses(&[(start, 1.0)], cnn_sigma());
+        verify(&refiner, std::slice::from_ref(&percepts), &mut estimate);
+        let result = &estimate[0];
         let heading_error = (result.pose.heading() - truth.heading()).sin().abs().asin().to_degrees();
         if result.pose.distance_to(&truth) <= 0.05 && heading_error <= 1.0 {
             recovered += 1;
@@ -176,11 +169,10 @@ fn lines_down_weight_a_contradicted_hypothesis_and_tie_point_twins() {
     let twin = Symmetry::PointReflection.apply(&truth);
     // A wrong hypothesis: the mirror image, which sees the lines mirrored.
     let wrong = Symmetry::MirrorLongAxis.apply(&truth);
-    let mut estimate = estimate(&[(truth, 0.3), (twin, 0.2), (wrong, 0.5)], cnn_sigma());
-    refiner.refine(std::slice::from_ref(&percepts), &mut estimate);
-    let find = |pose: &FieldPose| {
-        estimate.hypotheses.iter().find(|h| h.pose.distance_to(pose) < 0.2).expect("hypothesis kept")
-    };
+    let mut estimate = hypotheses(&[(truth, 0.3), (twin, 0.2), (wrong, 0.5)], cnn_sigma());
+    verify(&refiner, std::slice::from_ref(&percepts), &mut estimate);
+    let find =
+        |pose: &FieldPose| estimate.iter().find(|h| h.pose.distance_to(pose) < 0.2).expect("hypothesis kept");
     let (kept, kept_twin, contradicted) = (find(&truth), find(&twin), find(&wrong));
     assert_eq!(contradicted.lines.unwrap().check, LineCheck::Contradicted, "{:?}", contradicted.lines);
     assert!(contradicted.weight < 0.1 * kept.weight, "{} vs {}", contradicted.weight, kept.weight);
@@ -189,7 +181,7 @@ fn lines_down_weight_a_contradicted_hypothesis_and_tie_point_twins() {
     assert_eq!(kept.lines, kept_twin.lines);
     assert!((kept.weight / kept_twin.weight - 1.5).abs() < 1e-9, "{} / {}", kept.weight, kept_twin.weight);
     assert!(Symmetry::PointReflection.apply(&kept.pose).distance_to(&kept_twin.pose) < 1e-9);
-    let total: f64 = estimate.hypotheses.iter().map(|h| h.weight).sum();
+    let total: f64 = estimate.iter().map(|h| h.weight).sum();
     assert!((total - 1.0).abs() < 1e-9);
 }
 
@@ -206,9 +198,9 @@ fn frames_without_lines_stay_unrefined() {
     let pose = FieldPose::new(-1.0, 1.0, 0.5).unwrap();
     for frame in [carpet, black, noise] {
         let percepts = refiner.percepts(&frame, &CameraIntrinsics::nao_top(), &camera).unwrap();
-        let mut estimate = estimate(&[(pose, 1.0)], cnn_sigma());
-        refiner.refine(std::slice::from_ref(&percepts), &mut estimate);
-        let only = &estimate.hypotheses[0];
+        let mut estimate = hypotheses(&[(pose, 1.0)], cnn_sigma());
+        verify(&refiner, std::slice::from_ref(&percepts), &mut estimate);
+        let only = &estimate[0];
         assert_eq!(only.lines.unwrap().check, LineCheck::Unrefined);
         assert_eq!((only.pose, only.sigma), (pose, cnn_sigma()), "the network's hypothesis as it was");
     }

@@ -9,7 +9,8 @@ use std::str::FromStr;
 use serde::Deserialize;
 use thiserror::Error;
 
-use crate::geometry::{BodyAngles, CameraPose, PoseError, Representation};
+use crate::geometry::{CameraMounting, CameraPose, PoseError, Representation};
+use crate::protocol::address::Address;
 use crate::protocol::message::Encoding;
 use crate::relocaliser::{Backend, LoadOptions};
 
@@ -181,7 +182,7 @@ impl Config {
         if !self.camera.head_yaw_deg.is_finite() || self.camera.head_yaw_deg.abs() > 120.0 {
             return invalid("camera.head_yaw_deg", "must lie within ±120° (the Nao's head yaw range)");
         }
-        if let Err(error) = self.camera.mounted() {
+        if let Err(error) = self.camera.mounting() {
             return invalid("camera.height_m/pitch_deg/roll_deg", &error.to_string());
         }
         if !(8..=1280).contains(&self.sim.width) {
@@ -242,7 +243,7 @@ impl Default for GameControllerConfig {
 #[serde(default, deny_unknown_fields)]
 pub struct PublishConfig {
     /// Datagram targets.
-    pub targets: Vec<Target>,
+    pub targets: Vec<Address>,
     /// Message encoding.
     pub encoding: Encoding,
 }
@@ -250,7 +251,7 @@ pub struct PublishConfig {
 impl Default for PublishConfig {
     fn default() -> Self {
         Self {
-            targets: vec![Target::Udp(SocketAddr::from(([127, 0, 0, 1], 5454)))],
+            targets: vec![Address::Udp(SocketAddr::from(([127, 0, 0, 1], 5454)))],
             encoding: Encoding::Json,
         }
     }
@@ -304,19 +305,12 @@ pub struct CameraConfig {
 }
 
 impl CameraConfig {
-    /// The camera pose with the torso upright and the head at zero: the configured height, pitch and
-    /// roll.
-    pub fn mounted(&self) -> Result<CameraPose, PoseError> {
-        CameraPose::new(self.height_m, self.pitch_deg.to_radians(), self.roll_deg.to_radians(), 0.0)
-    }
-
-    /// The pose of a camera whose frame does not carry one: the mounted camera turned by the body angles
-    /// the sensors report (an upright body with the configured head yaw when they report none); a
-    /// trigger's `head_yaw` replaces the head yaw either way.
-    pub fn pose_on(&self, body: Option<BodyAngles>, head_yaw: Option<f64>) -> Result<CameraPose, PoseError> {
-        let body =
-            body.unwrap_or(BodyAngles { head_yaw: self.head_yaw_deg.to_radians(), ..BodyAngles::default() });
-        self.mounted()?.on_body(&BodyAngles { head_yaw: head_yaw.unwrap_or(body.head_yaw), ..body })
+    /// How the camera sits on the robot: the configured height, pitch and roll with the torso upright
+    /// and the head at zero, and the configured head yaw.
+    pub fn mounting(&self) -> Result<CameraMounting, PoseError> {
+        let mounted =
+            CameraPose::new(self.height_m, self.pitch_deg.to_radians(), self.roll_deg.to_radians(), 0.0)?;
+        Ok(CameraMounting { mounted, head_yaw: self.head_yaw_deg.to_radians() })
     }
 }
 
@@ -476,9 +470,9 @@ impl FromStr for Listen {
         if text == "off" {
             return Ok(Self::Off);
         }
-        match Target::from_str(text)? {
-            Target::Udp(address) => Ok(Self::Udp(address)),
-            Target::Unix(path) => Ok(Self::Unix(path)),
+        match Address::from_str(text)? {
+            Address::Udp(address) => Ok(Self::Udp(address)),
+            Address::Unix(path) => Ok(Self::Unix(path)),
         }
     }
 }
@@ -551,48 +545,6 @@ impl fmt::Display for SensorInput {
     }
 }
 
-/// A publish target: `udp:IP:PORT` or `unix:PATH` (a Unix datagram socket the receiver bound).
-#[derive(Clone, Debug, PartialEq, Deserialize)]
-#[serde(try_from = "String")]
-pub enum Target {
-    /// A UDP address (numeric: relocd resolves no host names).
-    Udp(SocketAddr),
-    /// A Unix datagram socket path.
-    Unix(PathBuf),
-}
-
-impl FromStr for Target {
-    type Err = String;
-
-    fn from_str(text: &str) -> Result<Self, Self::Err> {
-        match text.split_once(':') {
-            Some(("udp", address)) => address.parse().map(Self::Udp).map_err(|_| {
-                format!("{text:?}: expected udp:IP:PORT with a numeric address, e.g. udp:127.0.0.1:5454")
-            }),
-            Some(("unix", "")) => Err(format!("{text:?} names no socket path")),
-            Some(("unix", path)) => Ok(Self::Unix(PathBuf::from(path))),
-            _ => Err(format!("{text:?}: expected udp:IP:PORT or unix:PATH")),
-        }
-    }
-}
-
-impl TryFrom<String> for Target {
-    type Error = String;
-
-    fn try_from(text: String) -> Result<Self, Self::Error> {
-        text.parse()
-    }
-}
-
-impl fmt::Display for Target {
-    fn fmt(&self, formatter: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            Self::Udp(address) => write!(formatter, "udp:{address}"),
-            Self::Unix(path) => write!(formatter, "unix:{}", path.display()),
-        }
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -645,7 +597,7 @@ mod tests {
         assert_eq!(config.representation, Some(Representation::Quarter));
         assert_eq!(config.backend, Backend::Onnxruntime);
         assert_eq!(config.publish.encoding, Encoding::Msgpack);
-        assert_eq!(config.publish.targets[1], Target::Unix("/tmp/loc".into()));
+        assert_eq!(config.publish.targets[1], Address::Unix("/tmp/loc".into()));
         assert!(!config.replay.looping);
     }
 
@@ -672,22 +624,6 @@ mod tests {
     }
 
     #[test]
-    fn the_camera_pose_comes_from_the_sensors_the_trigger_or_the_config() {
-        let camera = CameraConfig { head_yaw_deg: 30.0, pitch_deg: 2.0, ..CameraConfig::default() };
-        let assumed = camera.pose_on(None, None).unwrap();
-        assert!((assumed.head_yaw() - 30f64.to_radians()).abs() < 1e-12);
-        assert!((assumed.pitch() - 2f64.to_radians()).abs() < 1e-12);
-        let body = BodyAngles { head_yaw: 0.5, head_pitch: 0.2, ..BodyAngles::default() };
-        let sensed = camera.pose_on(Some(body), None).unwrap();
-        assert!((sensed.head_yaw() - 0.5).abs() < 1e-12, "the sensed yaw replaces the configured one");
-        assert!((sensed.pitch() - (2f64.to_radians() + 0.2)).abs() < 1e-12);
-        let requested = camera.pose_on(Some(body), Some(-0.25)).unwrap();
-        assert!((requested.head_yaw() + 0.25).abs() < 1e-12, "a trigger's yaw wins");
-        assert_eq!(requested.pitch(), sensed.pitch());
-        assert!(camera.pose_on(Some(BodyAngles { torso_roll: f64::NAN, ..body }), None).is_err());
-    }
-
-    #[test]
     fn specs_print_as_they_parse() {
         for text in ["v4l:/dev/video-top", "frames:unix:/tmp/f", "replay:rec", "sim"] {
             assert_eq!(text.parse::<SourceSpec>().unwrap().to_string(), text);
@@ -697,7 +633,7 @@ mod tests {
         }
         assert_eq!("lola:/tmp/robocup".parse::<SensorInput>().unwrap().to_string(), "lola:/tmp/robocup");
         assert!("frames:/tmp/f".parse::<SourceSpec>().is_err());
-        assert!("unix:".parse::<Target>().is_err());
+        assert!("unix:".parse::<Address>().is_err());
         assert!("lola:".parse::<SensorInput>().is_err());
     }
 }

@@ -5,6 +5,7 @@
 pub mod config;
 pub mod publish;
 pub mod queue;
+pub mod record;
 pub mod sockets;
 pub mod source;
 pub mod status;
@@ -23,17 +24,16 @@ use self::config::{Config, Listen, SensorInput, SourceSpec};
 use self::publish::Publisher;
 use self::queue::TriggerQueue;
 use self::sockets::Datagram;
-use self::source::FrameSource;
-use self::source::forwarded::{ForwardedSource, FrameQueue};
+use self::source::forwarded::FrameQueue;
+use self::source::{FrameSource, SourceSettings};
 use self::status::Status;
 use self::triggers::{Sensed, Triggers};
 use self::worker::{ModelSlot, Worker};
 use crate::geometry::FieldModel;
+use crate::pipeline::Pipeline;
 use crate::posture::{PostureConfig, PostureDetector};
 use crate::protocol::gamecontroller::PenaltyWatch;
-use crate::recording::Recording;
-use crate::refine::LineRefiner;
-use crate::relocaliser::{self, Backend, Model, Relocaliser};
+use crate::relocaliser::{self, Backend, Model};
 
 /// Triggers waiting for the relocalisation thread on their own; more join a waiting one of their kind.
 const TRIGGER_QUEUE: usize = 64;
@@ -79,14 +79,15 @@ pub fn run(config: Config) -> anyhow::Result<()> {
     drop(triggers);
     let replacement = Arc::new(ModelSlot::default());
 
-    let refiner = config.refine.then(|| LineRefiner::new(&FieldModel::new(model.contract().field.clone())));
+    let field = FieldModel::new(model.contract().field.clone());
+    let pipeline = Pipeline::new(model);
+    let pipeline = if config.refine { pipeline.with_lines(&field) } else { pipeline };
     let worker = Worker {
-        relocaliser: Relocaliser::new(model),
+        pipeline,
         source,
         publisher,
         burst: config.burst.clone(),
-        camera: config.camera.clone(),
-        refiner,
+        mounting: config.camera.mounting()?,
         sensed,
         status: status.clone(),
         stop: stop.clone(),
@@ -177,46 +178,24 @@ fn apply_process_settings(config: &Config) -> anyhow::Result<()> {
 
 /// The configured frame source; a forwarded-frame listener is started for `frames:`.
 fn open_source(config: &Config, model: &Model, status: &Arc<Status>) -> anyhow::Result<Box<dyn FrameSource>> {
-    Ok(match &config.source {
-        SourceSpec::Replay(directory) => {
-            let recording = Recording::open(directory)?;
-            Box::new(source::replay::ReplaySource::open(recording, config.replay.looping)?)
-        }
-        SourceSpec::Sim => {
-            let field = FieldModel::new(model.contract().field.clone());
-            Box::new(source::sim::SimSource::new(field, config.sim.width, config.sim.height, config.sim.seed))
-        }
+    let frames = match &config.source {
         SourceSpec::Frames(path) => {
             let listener = sockets::bind_stream(path)
                 .with_context(|| format!("cannot listen for forwarded frames on {}", path.display()))?;
             info!("forwarded frames: unix:{}", path.display());
             let queue = Arc::new(FrameQueue::new(config.frames.queue));
             tokio::spawn(source::forwarded::listen(listener, queue.clone(), status.clone()));
-            Box::new(ForwardedSource::new(queue))
+            Some(queue)
         }
-        SourceSpec::V4l(device) => v4l_source(config, device)?,
-    })
-}
-
-#[cfg(feature = "v4l")]
-fn v4l_source(config: &Config, device: &std::path::Path) -> anyhow::Result<Box<dyn FrameSource>> {
-    let camera = &config.camera;
-    Ok(Box::new(source::v4l::V4lSource::new(
-        device.to_path_buf(),
-        camera.width,
-        camera.height,
-        camera.fps,
-        camera.keep_streaming,
-    )))
-}
-
-#[cfg(not(feature = "v4l"))]
-fn v4l_source(_: &Config, device: &std::path::Path) -> anyhow::Result<Box<dyn FrameSource>> {
-    bail!(
-        "source v4l:{} needs a relocd built with the `v4l` feature (cargo build --features v4l, \
-         which needs libclang-dev); use replay:DIR, frames:unix:PATH or sim otherwise",
-        device.display()
-    )
+        _ => None,
+    };
+    let settings = SourceSettings {
+        camera: config.camera.clone(),
+        sim: config.sim.clone(),
+        field: FieldModel::new(model.contract().field.clone()),
+        looping: config.replay.looping,
+    };
+    source::open(&config.source, &settings, frames)
 }
 
 /// How far a listener reaches, for the start-up log: anything beyond loopback is a config choice

@@ -7,13 +7,13 @@ use std::os::unix::net::UnixDatagram;
 
 use tracing::{debug, warn};
 
-use super::config::Target;
+use crate::protocol::address::Address;
 use crate::protocol::message::{Encoding, Message};
 
 /// Sends messages to the configured targets.
 #[derive(Debug)]
 pub struct Publisher {
-    targets: Vec<Target>,
+    targets: Vec<Address>,
     encoding: Encoding,
     udp4: UdpSocket,
     udp6: Option<UdpSocket>,
@@ -22,10 +22,10 @@ pub struct Publisher {
 
 impl Publisher {
     /// Sockets for `targets`; nothing is sent yet.
-    pub fn new(targets: Vec<Target>, encoding: Encoding) -> io::Result<Self> {
+    pub fn new(targets: Vec<Address>, encoding: Encoding) -> io::Result<Self> {
         let udp4 = UdpSocket::bind((Ipv4Addr::UNSPECIFIED, 0))?;
         udp4.set_nonblocking(true)?;
-        let wants_v6 = targets.iter().any(|target| matches!(target, Target::Udp(SocketAddr::V6(_))));
+        let wants_v6 = targets.iter().any(|target| matches!(target, Address::Udp(SocketAddr::V6(_))));
         let udp6 = if wants_v6 { Some(UdpSocket::bind((Ipv6Addr::UNSPECIFIED, 0))?) } else { None };
         if let Some(socket) = &udp6 {
             socket.set_nonblocking(true)?;
@@ -41,12 +41,12 @@ impl Publisher {
         let mut refused = 0;
         for target in &self.targets {
             let sent = match target {
-                Target::Udp(address @ SocketAddr::V4(_)) => self.udp4.send_to(&bytes, address).map(drop),
-                Target::Udp(address) => match &self.udp6 {
+                Address::Udp(address @ SocketAddr::V4(_)) => self.udp4.send_to(&bytes, address).map(drop),
+                Address::Udp(address) => match &self.udp6 {
                     Some(socket) => socket.send_to(&bytes, address).map(drop),
                     None => Err(io::Error::other("no IPv6 socket")),
                 },
-                Target::Unix(path) => self.unix.send_to(&bytes, path).map(drop),
+                Address::Unix(path) => self.unix.send_to(&bytes, path).map(drop),
             };
             match sent {
                 Ok(()) => debug!("message {} sent to {target} ({} bytes)", message.seq, bytes.len()),

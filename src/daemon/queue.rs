@@ -6,12 +6,29 @@
 use std::collections::VecDeque;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Condvar, Mutex, MutexGuard};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
-use super::triggers::TriggerEvent;
+use crate::protocol::message::TriggerKind;
 
 /// How often a waiting relocalisation thread looks at the stop flag.
 const STOP_POLL: Duration = Duration::from_millis(100);
+
+/// A request to relocalise.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TriggerEvent {
+    /// Unique per run, from 1.
+    pub id: u64,
+    /// What happened.
+    pub kind: TriggerKind,
+    /// Detail for the message.
+    pub reason: Option<String>,
+    /// The head yaw the frames will be taken with, radians, if the trigger knows it.
+    pub head_yaw: Option<f64>,
+    /// When it arrived.
+    pub at: Instant,
+    /// When it arrived, Unix seconds.
+    pub t: f64,
+}
 
 /// Where a trigger went.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

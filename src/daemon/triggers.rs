@@ -13,7 +13,7 @@ use tokio::io::AsyncReadExt;
 use tokio::net::UnixStream;
 use tracing::{debug, info, warn};
 
-use super::queue::{Queued, TriggerQueue};
+use super::queue::{Queued, TriggerEvent, TriggerQueue};
 use super::sockets::{Datagram, MAX_DATAGRAM, Peer};
 use super::source::unix_now;
 use super::status::{GameInfo, Status};
@@ -21,30 +21,13 @@ use crate::geometry::BodyAngles;
 use crate::posture::{PostureDetector, PostureEvent};
 use crate::protocol::control::ControlRequest;
 use crate::protocol::gamecontroller::{GameControlData, PacketOrder, PenaltyWatch};
-use crate::protocol::lola::LolaState;
+use crate::protocol::lola::{LolaState, next_msgpack_value};
 use crate::protocol::message::TriggerKind;
 
 /// Sensor data older than this says nothing about whether the robot stands still now.
 const SENSORS_FRESH: Duration = Duration::from_millis(300);
 /// LoLA's stream is dropped and re-read when this much arrives without a whole message.
 const MAX_LOLA_BUFFER: usize = 64 * 1024;
-
-/// A request to relocalise.
-#[derive(Clone, Debug, PartialEq)]
-pub struct TriggerEvent {
-    /// Unique per run, from 1.
-    pub id: u64,
-    /// What happened.
-    pub kind: TriggerKind,
-    /// Detail for the message.
-    pub reason: Option<String>,
-    /// The head yaw the frames will be taken with, radians, if the trigger knows it.
-    pub head_yaw: Option<f64>,
-    /// When it arrived.
-    pub at: Instant,
-    /// When it arrived, Unix seconds.
-    pub t: f64,
-}
 
 /// Hands triggers to the relocalisation thread.
 #[derive(Clone, Debug)]
@@ -308,23 +291,6 @@ pub async fn lola_stream(
     }
 }
 
-/// Length of the first whole msgpack value in `bytes`, if one is complete. Malformed bytes count as
-/// a one-byte value, so the caller's decoder refuses them and the stream moves on.
-fn next_msgpack_value(bytes: &[u8]) -> Option<usize> {
-    if bytes.is_empty() {
-        return None;
-    }
-    let mut rest = bytes;
-    match rmp_serde::from_read::<_, serde::de::IgnoredAny>(&mut rest) {
-        Ok(_) => Some(bytes.len() - rest.len()),
-        Err(
-            rmp_serde::decode::Error::InvalidMarkerRead(error)
-            | rmp_serde::decode::Error::InvalidDataRead(error),
-        ) if error.kind() == std::io::ErrorKind::UnexpectedEof => None,
-        Err(_) => Some(1),
-    }
-}
-
 /// The control socket: `{"relocalise": …}` answers `{"accepted": {"trigger": ID}}`, `{"status": {}}`
 /// answers the counters, anything else `{"error": …}`.
 pub async fn control(socket: Datagram, limit: usize, triggers: Triggers, status: Arc<Status>) {
@@ -363,17 +329,6 @@ pub async fn control(socket: Datagram, limit: usize, triggers: Triggers, status:
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn msgpack_values_are_found_whole_in_a_stream() {
-        let state = serde_json::json!({"Angles": [0.0, 0.1], "Gyroscope": [0, 0, 0], "FSR": [1, 1, 1, 1, 1, 1, 1, 1]});
-        let one = rmp_serde::to_vec_named(&state).unwrap();
-        let two = [one.clone(), one.clone()].concat();
-        assert_eq!(next_msgpack_value(&two), Some(one.len()));
-        assert_eq!(next_msgpack_value(&one[..one.len() - 3]), None, "wait for the rest");
-        assert_eq!(next_msgpack_value(b"\xc1rest"), Some(1), "0xc1 is never valid: skip it");
-        assert_eq!(next_msgpack_value(b""), None);
-    }
 
     #[test]
     fn a_trigger_beyond_the_queue_is_answered_by_a_waiting_one_and_counted() {

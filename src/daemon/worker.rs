@@ -9,36 +9,35 @@ use std::time::{Duration, Instant};
 
 use tracing::{info, warn};
 
-use super::config::{BurstConfig, CameraConfig};
+use super::config::BurstConfig;
 use super::publish::Publisher;
-use super::queue::TriggerQueue;
-use super::source::{CaptureRequest, FrameSource, sleep_unless_stopped, unix_now};
+use super::queue::{TriggerEvent, TriggerQueue};
+use super::source::{CaptureRequest, FrameSource, capture, sleep_unless_stopped, unix_now};
 use super::status::Status;
-use super::triggers::{Sensed, TriggerEvent};
-use crate::geometry::{CameraIntrinsics, FieldPose};
+use super::triggers::Sensed;
+use crate::geometry::{CameraMounting, FieldPose};
+use crate::pipeline::{Pipeline, PlacementPrior, StageTimes};
 use crate::protocol::message::{
-    FrameCounts, Hypothesis, Latency, Message, ModelInfo, SCHEMA_VERSION, Trigger, TriggerKind,
+    FrameCounts, Latency, Message, ModelInfo, SCHEMA_VERSION, Trigger, TriggerKind,
 };
-use crate::refine::{FramePercepts, LineRefiner};
-use crate::relocaliser::{Model, PlacementPrior, Prediction, Relocaliser, fuse};
+use crate::relocaliser::Model;
 
 /// How often the settle wait looks at the sensors.
 const SETTLE_POLL: Duration = Duration::from_millis(20);
 
 /// Everything the relocalisation thread owns.
 pub struct Worker {
-    /// The network.
-    pub relocaliser: Relocaliser,
+    /// The network and the line checks.
+    pub pipeline: Pipeline,
     /// Where frames come from.
     pub source: Box<dyn FrameSource>,
     /// Where messages go.
     pub publisher: Publisher,
     /// Burst size and timing.
     pub burst: BurstConfig,
-    /// The camera's mounting (and the head yaw assumed when neither frame, trigger nor sensors give one).
-    pub camera: CameraConfig,
-    /// Verifies and refines hypotheses against the field lines; `None` when refinement is off.
-    pub refiner: Option<LineRefiner>,
+    /// How the camera sits on the robot (and the head yaw assumed when neither frame, trigger nor
+    /// sensors give one).
+    pub mounting: CameraMounting,
     /// What the sensor task last saw: steadiness and the body angles that turn the camera.
     pub sensed: Arc<Sensed>,
     /// Counters.
@@ -68,10 +67,7 @@ impl ModelSlot {
 struct BurstTimes {
     capture_started: Instant,
     capture_ms: f64,
-    preprocess_ms: f64,
-    inference_ms: f64,
-    fusion_ms: f64,
-    refine_ms: f64,
+    stages: StageTimes,
 }
 
 impl Worker {
@@ -97,7 +93,7 @@ impl Worker {
             }
             if let Some(model) = self.replacement.take() {
                 info!("relocalising with model {} from now on", model.contract().model_id);
-                self.relocaliser = Relocaliser::new(model);
+                self.pipeline.replace_model(model);
             }
             last_burst = Some(Instant::now());
             seq += 1;
@@ -131,7 +127,7 @@ impl Worker {
 
     /// One burst for `batch`, as a message.
     fn relocalise(&mut self, seq: u64, batch: &[TriggerEvent]) -> Message {
-        let contract = self.relocaliser.model().contract();
+        let contract = self.pipeline.relocaliser().model().contract();
         let head_yaw = batch.iter().rev().find_map(|trigger| trigger.head_yaw);
         let penalty_return = batch.iter().any(|trigger| trigger.kind == TriggerKind::PenaltyReturn);
         let mut message = Message {
@@ -156,14 +152,8 @@ impl Worker {
             failure: None,
         };
         let first_at = batch[0].at;
-        let mut times = BurstTimes {
-            capture_started: Instant::now(),
-            capture_ms: 0.0,
-            preprocess_ms: 0.0,
-            inference_ms: 0.0,
-            fusion_ms: 0.0,
-            refine_ms: 0.0,
-        };
+        let mut times =
+            BurstTimes { capture_started: Instant::now(), capture_ms: 0.0, stages: StageTimes::default() };
         match self.estimate(head_yaw, penalty_return, &mut times, &mut message) {
             Ok(()) => {}
             Err(failure) => {
@@ -176,17 +166,17 @@ impl Worker {
         message.latency_ms = Latency {
             wait: ms(times.capture_started - first_at),
             capture: times.capture_ms,
-            preprocess: times.preprocess_ms,
-            inference: times.inference_ms,
-            fusion: times.fusion_ms,
-            refine: times.refine_ms,
+            preprocess: times.stages.preprocess_ms,
+            inference: times.stages.inference_ms,
+            fusion: times.stages.fusion_ms,
+            refine: times.stages.lines_ms,
             total: ms(first_at.elapsed()),
         };
         message.published = unix_now();
         message
     }
 
-    /// Captures, relocalises and fuses into `message`; the failure reason otherwise.
+    /// Captures a burst and runs it through the pipeline into `message`; the failure reason otherwise.
     fn estimate(
         &mut self,
         head_yaw: Option<f64>,
@@ -200,81 +190,42 @@ impl Worker {
             deadline: times.capture_started + Duration::from_millis(self.burst.timeout_ms),
             stop: &self.stop,
         };
-        // Each frame is relocalised as it arrives, while the source waits for the next one.
-        let mut predictions: Vec<Prediction> = Vec::with_capacity(request.count);
-        let mut percepts: Vec<FramePercepts> = Vec::new();
-        let mut errors = Vec::new();
+        // Each frame goes through the network as it arrives, while the source waits for the next one.
+        let mut burst = self.pipeline.burst();
         let mut first_taken = None;
         let mut truth = None;
-        let (relocaliser, refiner, mounting, sensed) =
-            (&self.relocaliser, &self.refiner, &self.camera, &self.sensed);
-        let captured = self.source.capture(&request, &mut |captured| {
+        let (checks_lines, mounting, sensed) = (self.pipeline.checks_lines(), self.mounting, &self.sensed);
+        let captured = capture(self.source.as_mut(), &request, &mut |captured| {
             first_taken.get_or_insert(captured.taken);
             truth = truth.or(captured.truth);
-            let body = sensed.body_angles();
-            let camera = captured.camera.map_or_else(|| mounting.pose_on(body, head_yaw), Ok);
+            let camera = captured.camera.map_or_else(|| mounting.pose_on(sensed.body_angles(), head_yaw), Ok);
             let yaw = match &camera {
                 Ok(camera) => camera.head_yaw(),
-                Err(_) => head_yaw.unwrap_or(mounting.head_yaw_deg.to_radians()),
+                Err(_) => head_yaw.unwrap_or(mounting.head_yaw),
             };
-            if let Some(refiner) = refiner {
-                let lines = Instant::now();
-                match camera.map_err(|e| e.to_string()).and_then(|camera| {
-                    refiner
-                        .percepts(&captured.frame, &CameraIntrinsics::nao_top(), &camera)
-                        .map_err(|e| e.to_string())
-                }) {
-                    Ok(found) => percepts.push(found),
-                    Err(error) => warn!("frame not used for line refinement: {error}"),
-                }
-                times.refine_ms += lines.elapsed().as_secs_f64() * 1e3;
+            if let (Err(error), true) = (&camera, checks_lines) {
+                warn!("frame not used for line refinement: {error}");
             }
-            match relocaliser.relocalise(&captured.frame, yaw) {
-                Ok(result) => {
-                    times.preprocess_ms += result.timings.preprocess_ms;
-                    times.inference_ms += result.timings.inference_ms;
-                    times.fusion_ms += result.timings.decode_ms;
-                    predictions.push(result.prediction);
-                }
-                Err(error) => errors.push(error.to_string()),
-            }
+            // A frame the network fails on is counted by the burst and reported below.
+            let _ = burst.add(&captured.frame, yaw, camera.as_ref().ok());
         });
         times.capture_ms = times.capture_started.elapsed().as_secs_f64() * 1e3;
         let frames = captured.map_err(|error| format!("no frames: {error}"))?;
         message.captured = first_taken;
 
-        if let Some(error) = errors.first() {
-            warn!("{} of {frames} frames could not be relocalised: {error}", errors.len());
+        if let Some(error) = burst.failures().first() {
+            warn!("{} of {frames} frames could not be relocalised: {error}", burst.failures().len());
         }
-        let fusing = Instant::now();
-        let mut estimate = fuse(&predictions).map_err(|error| match errors.first() {
-            Some(frame_error) => format!("no frame could be relocalised: {frame_error}"),
-            None => error.to_string(),
-        })?;
-        times.fusion_ms += fusing.elapsed().as_secs_f64() * 1e3;
-        if let Some(refiner) = &self.refiner {
-            let refining = Instant::now();
-            refiner.refine(&percepts, &mut estimate);
-            times.refine_ms += refining.elapsed().as_secs_f64() * 1e3;
-        }
-        if penalty_return {
-            PlacementPrior::penalty_return().apply(&mut estimate.hypotheses);
+        let prior = penalty_return.then(PlacementPrior::penalty_return);
+        let (estimate, stages) = burst.finish(prior.as_ref());
+        times.stages = stages;
+        let estimate = estimate.map_err(|error| error.to_string())?;
+        if prior.is_some() {
             message.prior = Some("penalty_return".into());
         }
         message.frames.used = estimate.frames as u32;
         message.frames.agreeing = estimate.agreeing as u32;
-        message.hypotheses = estimate
-            .hypotheses
-            .iter()
-            .map(|h| Hypothesis {
-                x: h.pose.x(),
-                y: h.pose.y(),
-                theta: h.pose.heading(),
-                weight: h.weight,
-                sigma: [h.sigma.x, h.sigma.y, h.sigma.theta],
-                lines: h.lines,
-            })
-            .collect();
+        message.hypotheses = estimate.hypotheses.iter().map(Into::into).collect();
         log_result(message, truth);
         Ok(())
     }

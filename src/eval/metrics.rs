@@ -4,8 +4,9 @@ use serde::Serialize;
 
 use crate::geometry::angle::angle_distance;
 use crate::geometry::{FieldPose, FoldClass, Representation};
+use crate::pipeline::Hypothesis;
 use crate::refine::LineCheck;
-use crate::relocaliser::{BurstEstimate, Prediction};
+use crate::relocaliser::Prediction;
 
 /// One evaluated frame: the truth and what the model said.
 #[derive(Clone, Debug)]
@@ -107,11 +108,11 @@ pub struct BurstEvaluation {
 }
 
 impl BurstEvaluation {
-    /// Scores a fused burst against the robot's true pose.
-    pub fn new(truth: &FieldPose, estimate: &BurstEstimate) -> Self {
+    /// Scores a burst's hypotheses (heaviest first, at least one) against the robot's true pose.
+    pub fn new(truth: &FieldPose, hypotheses: &[Hypothesis]) -> Self {
         let errors: Vec<(f64, f64)> =
-            estimate.hypotheses.iter().map(|hypothesis| pose_error(&hypothesis.pose, truth)).collect();
-        let heaviest = &estimate.hypotheses[0];
+            hypotheses.iter().map(|hypothesis| pose_error(&hypothesis.pose, truth)).collect();
+        let heaviest = &hypotheses[0];
         Self {
             modelled: errors[0],
             best_of_set: *errors.iter().min_by(|a, b| a.0.total_cmp(&b.0)).expect("at least one hypothesis"),
@@ -130,11 +131,11 @@ pub struct RefinedEvaluation {
 }
 
 impl RefinedEvaluation {
-    /// Scores a refined burst against the robot's true pose.
-    pub fn new(truth: &FieldPose, estimate: &BurstEstimate) -> Self {
+    /// Scores a refined burst's hypotheses (heaviest first, at least one) against the robot's true pose.
+    pub fn new(truth: &FieldPose, hypotheses: &[Hypothesis]) -> Self {
         Self {
-            errors: BurstEvaluation::new(truth, estimate),
-            check: estimate.hypotheses[0].lines.map(|lines| lines.check),
+            errors: BurstEvaluation::new(truth, hypotheses),
+            check: hypotheses[0].lines.map(|lines| lines.check),
         }
     }
 }

@@ -16,5 +16,5 @@ pub mod symmetry;
 pub use angle::normalize_angle;
 pub use camera::{Camera, CameraIntrinsics};
 pub use field::{FieldDimensions, FieldError, FieldModel};
-pub use pose::{BodyAngles, CameraPose, FieldPose, PoseError};
+pub use pose::{BodyAngles, CameraMounting, CameraPose, FieldPose, PoseError, PoseSigma};
 pub use symmetry::{FoldClass, FoldedPose, Hypothesis, Representation, Symmetry, SymmetryError};

@@ -8,6 +8,17 @@ use thiserror::Error;
 
 use super::angle::normalize_angle;
 
+/// Standard deviations of a pose estimate.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct PoseSigma {
+    /// Along x, metres.
+    pub x: f64,
+    /// Along y, metres.
+    pub y: f64,
+    /// Of the heading, radians.
+    pub theta: f64,
+}
+
 /// A pose value that cannot be used.
 #[derive(Debug, Error, PartialEq)]
 pub enum PoseError {
@@ -233,6 +244,27 @@ pub struct BodyAngles {
     pub head_pitch: f64,
 }
 
+/// How the camera sits on the robot: its pose with the torso upright and the head at zero, and the
+/// head yaw to assume when neither the sensors nor a trigger give one.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CameraMounting {
+    /// The camera's pose with the torso upright and the head at zero (its yaw is ignored).
+    pub mounted: CameraPose,
+    /// Head yaw assumed when nothing says otherwise, radians (positive: left).
+    pub head_yaw: f64,
+}
+
+impl CameraMounting {
+    /// The camera's pose on a body at `body` (the sensed torso and head angles; an upright body with
+    /// the assumed head yaw when there are none); `head_yaw`, a trigger's, replaces the head yaw
+    /// either way.
+    pub fn pose_on(&self, body: Option<BodyAngles>, head_yaw: Option<f64>) -> Result<CameraPose, PoseError> {
+        let body = body.unwrap_or(BodyAngles { head_yaw: self.head_yaw, ..BodyAngles::default() });
+        let mounted = CameraPose { head_yaw: 0.0, ..self.mounted };
+        mounted.on_body(&BodyAngles { head_yaw: head_yaw.unwrap_or(body.head_yaw), ..body })
+    }
+}
+
 impl Default for CameraPose {
     fn default() -> Self {
         Self::STANDING
@@ -258,6 +290,23 @@ mod tests {
     use super::*;
     use approx::assert_abs_diff_eq;
     use std::f64::consts::{FRAC_PI_2, PI};
+
+    #[test]
+    fn a_mounted_camera_takes_the_sensed_or_the_triggered_head_yaw() {
+        let mounted = CameraPose::new(0.5, 2f64.to_radians(), 0.0, 0.0).unwrap();
+        let camera = CameraMounting { mounted, head_yaw: 30f64.to_radians() };
+        let assumed = camera.pose_on(None, None).unwrap();
+        assert_abs_diff_eq!(assumed.head_yaw(), 30f64.to_radians(), epsilon = 1e-12);
+        assert_abs_diff_eq!(assumed.pitch(), 2f64.to_radians(), epsilon = 1e-12);
+        let body = BodyAngles { head_yaw: 0.5, head_pitch: 0.2, ..BodyAngles::default() };
+        let sensed = camera.pose_on(Some(body), None).unwrap();
+        assert_abs_diff_eq!(sensed.head_yaw(), 0.5, epsilon = 1e-12);
+        assert_abs_diff_eq!(sensed.pitch(), 2f64.to_radians() + 0.2, epsilon = 1e-12);
+        let requested = camera.pose_on(Some(body), Some(-0.25)).unwrap();
+        assert_abs_diff_eq!(requested.head_yaw(), -0.25, epsilon = 1e-12);
+        assert_eq!(requested.pitch(), sensed.pitch());
+        assert!(camera.pose_on(Some(BodyAngles { torso_roll: f64::NAN, ..body }), None).is_err());
+    }
 
     #[test]
     fn a_camera_on_an_upright_body_adds_the_head_angles() {

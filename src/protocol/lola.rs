@@ -47,9 +47,37 @@ impl LolaState {
     }
 }
 
+/// Length of the first whole msgpack value in a stream of `bytes` (LoLA's socket), if one is complete. Malformed bytes count as
+/// a one-byte value, so the caller's decoder refuses them and the stream moves on.
+pub fn next_msgpack_value(bytes: &[u8]) -> Option<usize> {
+    if bytes.is_empty() {
+        return None;
+    }
+    let mut rest = bytes;
+    match rmp_serde::from_read::<_, serde::de::IgnoredAny>(&mut rest) {
+        Ok(_) => Some(bytes.len() - rest.len()),
+        Err(
+            rmp_serde::decode::Error::InvalidMarkerRead(error)
+            | rmp_serde::decode::Error::InvalidDataRead(error),
+        ) if error.kind() == std::io::ErrorKind::UnexpectedEof => None,
+        Err(_) => Some(1),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn msgpack_values_are_found_whole_in_a_stream() {
+        let state = serde_json::json!({"Angles": [0.0, 0.1], "Gyroscope": [0, 0, 0], "FSR": [1, 1, 1, 1, 1, 1, 1, 1]});
+        let one = rmp_serde::to_vec_named(&state).unwrap();
+        let two = [one.clone(), one.clone()].concat();
+        assert_eq!(next_msgpack_value(&two), Some(one.len()));
+        assert_eq!(next_msgpack_value(&one[..one.len() - 3]), None, "wait for the rest");
+        assert_eq!(next_msgpack_value(b"\xc1rest"), Some(1), "0xc1 is never valid: skip it");
+        assert_eq!(next_msgpack_value(b""), None);
+    }
 
     #[test]
     fn lola_messages_decode_and_garbage_is_an_error() {

@@ -5,7 +5,6 @@ use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
 use crate::geometry::Representation;
-use crate::refine::LineEvidence;
 
 /// The schema version this relocd writes. A change that breaks readers bumps it; new optional keys do
 /// not.
@@ -119,6 +118,34 @@ pub struct Latency {
     pub total: f64,
 }
 
+/// What the field lines made of a hypothesis.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LineCheck {
+    /// The lines fix x, y and heading: the pose and σ are the line fit's.
+    Refined,
+    /// The lines fix only some directions (one family of parallel lines).
+    Partial,
+    /// Too few line points: the network's hypothesis as it was.
+    Unrefined,
+    /// The lines seen do not fit this pose cleanly: the network's pose, with its weight cut.
+    Contradicted,
+}
+
+/// The field lines' evidence about a hypothesis.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LineEvidence {
+    /// What was done with the hypothesis.
+    pub check: LineCheck,
+    /// Line points used, over all frames of the burst.
+    pub points: usize,
+    /// Share of the points on a field line under the pose.
+    pub inlier_share: f64,
+    /// Share of the lines the camera should have seen under the pose that it did not; absent when too
+    /// few were expected to tell.
+    pub unseen_share: Option<f64>,
+}
+
 /// One weighted full-field robot pose.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Hypothesis {
@@ -222,7 +249,6 @@ impl Message {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::refine::LineCheck;
 
     fn example() -> Message {
         Message {

@@ -13,15 +13,13 @@ pub mod optimise;
 pub mod percepts;
 
 use nalgebra::{Point2, Point3, Vector3};
-use serde::{Deserialize, Serialize};
 
 pub use line_map::LineMap;
 pub use percepts::{FramePercepts, LinePoint, PerceptError, detect};
 
 use crate::frame::Frame;
 use crate::geometry::angle::angle_distance;
-use crate::geometry::{CameraIntrinsics, CameraPose, FieldModel, FieldPose, Symmetry};
-use crate::relocaliser::{BurstEstimate, FusedHypothesis, PoseSigma};
+use crate::geometry::{CameraIntrinsics, CameraPose, FieldModel, FieldPose, PoseSigma, Symmetry};
 use optimise::{Observation, Prior, fit};
 
 /// Fewest line points a burst needs for refinement.
@@ -55,8 +53,7 @@ const MIN_PRIOR_SIGMA: (f64, f64) = (0.15, 0.09);
 const MAX_PRIOR_SIGMA: (f64, f64) = (0.6, 0.35);
 
 /// What the lines made of one hypothesis.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum LineCheck {
     /// The lines fix x, y and heading: the pose and σ are the fit's.
     Refined,
@@ -71,7 +68,7 @@ pub enum LineCheck {
 }
 
 /// The lines' evidence about one hypothesis.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LineEvidence {
     /// What was done with it.
     pub check: LineCheck,
@@ -82,6 +79,37 @@ pub struct LineEvidence {
     /// Share of the field lines the camera should have seen under the pose that it did not see;
     /// `None` when too few lines were expected to tell.
     pub unseen_share: Option<f64>,
+}
+
+/// A pose to verify, and the spread around it the fit may search.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Guess {
+    /// The robot's pose.
+    pub pose: FieldPose,
+    /// How far off it may be.
+    pub sigma: PoseSigma,
+}
+
+/// What the lines made of one guess.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LineFit {
+    /// The fitted pose, or the guess's where the lines contradict it.
+    pub pose: FieldPose,
+    /// The fit's spread, or the guess's where the lines contradict it.
+    pub sigma: PoseSigma,
+    /// The lines' evidence.
+    pub evidence: LineEvidence,
+    /// Factor for the guess's weight: the fit's quality squared, cut further where contradicted.
+    pub factor: f64,
+}
+
+/// The lines' answer for a burst's guesses.
+#[derive(Clone, Debug, PartialEq)]
+pub enum LineVerdict {
+    /// Too few line points to check anything: every guess stands as it was.
+    TooFewPoints(LineEvidence),
+    /// One fit per guess, in the guesses' order.
+    Checked(Vec<LineFit>),
 }
 
 /// Refines hypotheses against one field's lines.
@@ -117,70 +145,48 @@ impl LineRefiner {
         detect(frame, intrinsics, camera, self.line_width)
     }
 
-    /// Verifies and refines the hypotheses of `estimate` against the line points of its frames,
-    /// re-weights them and sorts them heaviest first. Every hypothesis gets its [`LineEvidence`].
-    pub fn refine(&self, frames: &[FramePercepts], estimate: &mut BurstEstimate) {
+    /// Verifies and refines each guess against the line points of a burst's frames: the fitted pose
+    /// and σ (or the guess as it was) with the lines' evidence and a weight factor, in the guesses'
+    /// order. With too few line points nothing is checked.
+    pub fn check(&self, frames: &[FramePercepts], guesses: &[Guess]) -> LineVerdict {
         let observations = observations(frames);
         if observations.len() < MIN_POINTS {
-            let evidence = LineEvidence {
+            return LineVerdict::TooFewPoints(LineEvidence {
                 check: LineCheck::Unrefined,
                 points: observations.len(),
                 inlier_share: 0.0,
                 unseen_share: None,
-            };
-            for hypothesis in &mut estimate.hypotheses {
-                hypothesis.lines = Some(evidence);
-            }
-            return;
+            });
         }
-        let originals: Vec<FusedHypothesis> = estimate.hypotheses.clone();
-        let mut refined: Vec<(FusedHypothesis, f64)> = Vec::with_capacity(originals.len());
-        for (index, hypothesis) in originals.iter().enumerate() {
+        let mut fits: Vec<LineFit> = Vec::with_capacity(guesses.len());
+        for (index, guess) in guesses.iter().enumerate() {
             // A point-symmetric twin of one already refined sees the same lines: mirror its result.
-            let twin = originals[..index].iter().position(|earlier| {
+            let twin = guesses[..index].iter().position(|earlier| {
                 let image = Symmetry::PointReflection.apply(&earlier.pose);
-                image.distance_to(&hypothesis.pose) < 1e-6
-                    && angle_distance(image.heading(), hypothesis.pose.heading()) < 1e-6
+                image.distance_to(&guess.pose) < 1e-6
+                    && angle_distance(image.heading(), guess.pose.heading()) < 1e-6
             });
-            refined.push(match twin {
+            fits.push(match twin {
                 Some(twin) => {
-                    let (twin_result, factor) = refined[twin];
-                    let pose = Symmetry::PointReflection.apply(&twin_result.pose);
-                    (FusedHypothesis { pose, weight: hypothesis.weight, ..twin_result }, factor)
+                    LineFit { pose: Symmetry::PointReflection.apply(&fits[twin].pose), ..fits[twin] }
                 }
-                None => self.refine_one(frames, &observations, hypothesis),
+                None => self.check_one(frames, &observations, guess),
             });
         }
-        for (hypothesis, factor) in &mut refined {
-            hypothesis.weight *= *factor;
-        }
-        let total: f64 = refined.iter().map(|(hypothesis, _)| hypothesis.weight).sum();
-        estimate.hypotheses = refined
-            .into_iter()
-            .map(|(mut hypothesis, _)| {
-                hypothesis.weight /= total;
-                hypothesis
-            })
-            .collect();
-        estimate.hypotheses.sort_by(|a, b| b.weight.total_cmp(&a.weight));
+        LineVerdict::Checked(fits)
     }
 
-    /// Fits and checks one hypothesis; returns it refined (or as it was) and its weight factor.
-    fn refine_one(
-        &self,
-        frames: &[FramePercepts],
-        observations: &[Observation],
-        hypothesis: &FusedHypothesis,
-    ) -> (FusedHypothesis, f64) {
+    /// Fits and checks one guess.
+    fn check_one(&self, frames: &[FramePercepts], observations: &[Observation], guess: &Guess) -> LineFit {
         // A spread that is not a number searches the widest region.
         let bounded =
             |sigma: f64, low: f64, high: f64| if sigma.is_finite() { sigma.clamp(low, high) } else { high };
         let prior = Prior {
-            pose: hypothesis.pose,
+            pose: guess.pose,
             sigma: Vector3::new(
-                bounded(hypothesis.sigma.x, MIN_PRIOR_SIGMA.0, MAX_PRIOR_SIGMA.0),
-                bounded(hypothesis.sigma.y, MIN_PRIOR_SIGMA.0, MAX_PRIOR_SIGMA.0),
-                bounded(hypothesis.sigma.theta, MIN_PRIOR_SIGMA.1, MAX_PRIOR_SIGMA.1),
+                bounded(guess.sigma.x, MIN_PRIOR_SIGMA.0, MAX_PRIOR_SIGMA.0),
+                bounded(guess.sigma.y, MIN_PRIOR_SIGMA.0, MAX_PRIOR_SIGMA.0),
+                bounded(guess.sigma.theta, MIN_PRIOR_SIGMA.1, MAX_PRIOR_SIGMA.1),
             ),
         };
         let fitted = fit(&self.map, observations, &prior);
@@ -189,10 +195,12 @@ impl LineRefiner {
         let quality = inlier_share * (1.0 - unseen_share.unwrap_or(0.0));
         let points = observations.len();
         if inlier_share < MIN_INLIER_SHARE || unseen_share.is_some_and(|unseen| unseen > MAX_UNSEEN_SHARE) {
-            let evidence =
-                LineEvidence { check: LineCheck::Contradicted, points, inlier_share, unseen_share };
-            let factor = quality.max(0.01).powi(2) * CONTRADICTED_FACTOR;
-            return (FusedHypothesis { lines: Some(evidence), ..*hypothesis }, factor);
+            return LineFit {
+                pose: guess.pose,
+                sigma: guess.sigma,
+                evidence: LineEvidence { check: LineCheck::Contradicted, points, inlier_share, unseen_share },
+                factor: quality.max(0.01).powi(2) * CONTRADICTED_FACTOR,
+            };
         }
         let line_sigma = fitted
             .line_information
@@ -204,13 +212,12 @@ impl LineRefiner {
         });
         let check = if fixed { LineCheck::Refined } else { LineCheck::Partial };
         let sigma = fitted.covariance.diagonal().map(|variance| variance.max(0.0).sqrt());
-        let refined = FusedHypothesis {
+        LineFit {
             pose: fitted.pose,
-            weight: hypothesis.weight,
             sigma: PoseSigma { x: sigma.x, y: sigma.y, theta: sigma.z },
-            lines: Some(LineEvidence { check, points, inlier_share, unseen_share }),
-        };
-        (refined, quality.powi(2))
+            evidence: LineEvidence { check, points, inlier_share, unseen_share },
+            factor: quality.powi(2),
+        }
     }
 
     /// Share of the points within `INLIER_SIGMAS` σ (or 5 cm) of a line under `pose`.

@@ -13,8 +13,7 @@ use thiserror::Error;
 
 use super::decode::Prediction;
 use crate::geometry::angle::angle_distance;
-use crate::geometry::{FieldPose, Hypothesis, Representation};
-use crate::refine::LineEvidence;
+use crate::geometry::{FieldPose, Hypothesis, PoseSigma, Representation};
 
 /// Metres a radian of heading difference counts as when frames are compared.
 const METRES_PER_RADIAN: f64 = 1.0;
@@ -34,17 +33,6 @@ pub enum FusionError {
     MixedRepresentations(Representation, Representation),
 }
 
-/// Standard deviations of a pose estimate.
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
-pub struct PoseSigma {
-    /// Along x, metres.
-    pub x: f64,
-    /// Along y, metres.
-    pub y: f64,
-    /// Of the heading, radians.
-    pub theta: f64,
-}
-
 /// One fused full-field hypothesis.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FusedHypothesis {
@@ -52,11 +40,8 @@ pub struct FusedHypothesis {
     pub pose: FieldPose,
     /// Its probability; the set's weights sum to 1.
     pub weight: f64,
-    /// Spread: the burst's scatter combined with the frames' own predicted uncertainty (or, once
-    /// refined, the line fit's).
+    /// Spread: the burst's scatter combined with the frames' own predicted uncertainty.
     pub sigma: PoseSigma,
-    /// What the field lines said about it, once checked (see [`crate::refine`]).
-    pub lines: Option<LineEvidence>,
 }
 
 /// The fused result of one burst.
@@ -158,7 +143,7 @@ pub fn fuse(predictions: &[Prediction]) -> Result<BurstEstimate, FusionError> {
                 .map(|((frame, aligned), w)| w * frame.by_class[usize::from(class ^ aligned)].weight)
                 .sum::<f64>()
                 / weights.iter().sum::<f64>();
-            FusedHypothesis { pose, weight, sigma, lines: None }
+            FusedHypothesis { pose, weight, sigma }
         })
         .collect();
     hypotheses.sort_by(|a, b| b.weight.total_cmp(&a.weight));

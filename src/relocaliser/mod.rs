@@ -8,19 +8,17 @@ pub mod fusion;
 pub mod model;
 #[cfg(feature = "onnxruntime")]
 pub mod onnxruntime;
-pub mod pipeline;
 pub mod preprocess;
-pub mod prior;
+pub mod relocalise;
 
 use std::path::Path;
 
 pub use contract::{ContractError, InputSpec, ModelContract};
 pub use decode::{DecodeError, Prediction, RawOutput};
-pub use fusion::{BurstEstimate, FusedHypothesis, FusionError, PoseSigma, fuse};
+pub use fusion::{BurstEstimate, FusedHypothesis, FusionError, fuse};
 pub use model::{Backend, LoadOptions, Model, ModelError, kernel_isa};
-pub use pipeline::{Relocalisation, RelocaliseError, Relocaliser, Timings};
 pub use preprocess::{InputTensor, PreprocessError, preprocess};
-pub use prior::PlacementPrior;
+pub use relocalise::{Relocalisation, RelocaliseError, Relocaliser, Timings};
 
 /// A model built into the binary, so that relocd runs with no files beside it.
 #[derive(Clone, Copy, Debug)]

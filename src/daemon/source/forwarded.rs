@@ -10,7 +10,7 @@ use tokio::io::AsyncReadExt;
 use tokio::net::UnixStream;
 use tracing::{debug, warn};
 
-use super::{CaptureRequest, CapturedFrame, FrameSource, SourceError, unix_now};
+use super::{CaptureRequest, CapturedFrame, FrameSource, SourceError, Taken, unix_now};
 use crate::daemon::sockets::StreamListener;
 use crate::daemon::status::Status;
 use crate::frame::{Frame, YuyvImage};
@@ -86,36 +86,29 @@ impl ForwardedSource {
 }
 
 impl FrameSource for ForwardedSource {
-    fn capture(
+    fn next_frame(
         &mut self,
         request: &CaptureRequest<'_>,
-        deliver: &mut dyn FnMut(CapturedFrame),
-    ) -> Result<usize, SourceError> {
-        let started = Instant::now();
-        let mut after = started;
-        let mut delivered = 0;
-        while delivered < request.count && !request.stop.load(std::sync::atomic::Ordering::Relaxed) {
+        earliest: Instant,
+    ) -> Result<Option<Taken>, SourceError> {
+        while !request.stopped() {
             // Wake up now and then to notice a shutdown.
             let until = request.deadline.min(Instant::now() + Duration::from_millis(100));
-            match self.queue.first_after(after, until) {
+            match self.queue.first_after(earliest, until) {
                 Some(arrived) => {
-                    after = arrived.at + request.spacing.max(Duration::from_nanos(1));
-                    deliver(CapturedFrame {
+                    let frame = CapturedFrame {
                         frame: Frame::Yuyv(arrived.image),
                         taken: arrived.taken,
                         camera: arrived.camera,
                         truth: None,
-                    });
-                    delivered += 1;
+                    };
+                    return Ok(Some(Taken { frame, at: arrived.at }));
                 }
                 None if Instant::now() >= request.deadline => break,
                 None => {}
             }
         }
-        if delivered == 0 {
-            return Err(SourceError::Timeout(started.elapsed()));
-        }
-        Ok(delivered)
+        Ok(None)
     }
 }
 

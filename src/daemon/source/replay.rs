@@ -3,7 +3,7 @@
 
 use std::time::{Duration, Instant};
 
-use super::{CaptureRequest, CapturedFrame, FrameSource, SourceError, unix_now};
+use super::{CaptureRequest, CapturedFrame, FrameSource, SourceError, Taken, unix_now};
 use crate::recording::{Recording, RecordingError};
 
 /// Frame period assumed for a recording of a single frame.
@@ -45,7 +45,7 @@ impl ReplaySource {
     }
 
     /// The first frame shown at or after `at`, and when it is shown.
-    fn next_frame(&self, at: Instant) -> Result<(usize, Instant), SourceError> {
+    fn next_shown(&self, at: Instant) -> Result<(usize, Instant), SourceError> {
         let elapsed = (at.saturating_duration_since(self.started)).as_secs_f64();
         let mut pass = (elapsed / self.period).floor();
         if !self.looping && pass >= 1.0 {
@@ -72,41 +72,23 @@ impl ReplaySource {
 }
 
 impl FrameSource for ReplaySource {
-    fn capture(
+    fn next_frame(
         &mut self,
         request: &CaptureRequest<'_>,
-        deliver: &mut dyn FnMut(CapturedFrame),
-    ) -> Result<usize, SourceError> {
-        let started = Instant::now();
-        let mut delivered = 0;
-        let mut earliest = started;
-        while delivered < request.count {
-            let (index, shown) = match self.next_frame(earliest) {
-                Ok(next) => next,
-                Err(error) if delivered == 0 => return Err(error),
-                Err(_) => break,
-            };
-            if !request.sleep_until(shown) {
-                break;
-            }
-            let record = &self.recording.records()[index];
-            deliver(CapturedFrame {
-                frame: self.recording.load_frame(record)?,
-                taken: unix_now(),
-                camera: record.camera,
-                truth: record.pose,
-            });
-            delivered += 1;
-            earliest = shown + request.spacing.max(Duration::from_micros(1));
+        earliest: Instant,
+    ) -> Result<Option<Taken>, SourceError> {
+        let (index, shown) = self.next_shown(earliest)?;
+        if !request.sleep_until(shown) {
+            return Ok(None);
         }
-        if delivered == 0 {
-            return Err(if request.stop.load(std::sync::atomic::Ordering::Relaxed) {
-                SourceError::Stopped
-            } else {
-                SourceError::Timeout(request.deadline.saturating_duration_since(started))
-            });
-        }
-        Ok(delivered)
+        let record = &self.recording.records()[index];
+        let frame = CapturedFrame {
+            frame: self.recording.load_frame(record)?,
+            taken: unix_now(),
+            camera: record.camera,
+            truth: record.pose,
+        };
+        Ok(Some(Taken { frame, at: shown }))
     }
 }
 

@@ -5,7 +5,7 @@
 use std::f64::consts::TAU;
 use std::time::Instant;
 
-use super::{CaptureRequest, CapturedFrame, FrameSource, SourceError, unix_now};
+use super::{CaptureRequest, CapturedFrame, FrameSource, SourceError, Taken, unix_now};
 use crate::frame::Frame;
 use crate::geometry::{Camera, CameraIntrinsics, FieldModel, FieldPose};
 use crate::sim::{Randomisation, render};
@@ -48,33 +48,24 @@ pub fn walk(seconds: f64) -> FieldPose {
 }
 
 impl FrameSource for SimSource {
-    fn capture(
+    fn next_frame(
         &mut self,
         request: &CaptureRequest<'_>,
-        deliver: &mut dyn FnMut(CapturedFrame),
-    ) -> Result<usize, SourceError> {
-        let mut delivered = 0;
-        let mut next = Instant::now();
-        while delivered < request.count && request.sleep_until(next) {
-            let sample = self.randomisation.sample(&self.field, self.seed, self.frames_taken, 1);
-            self.frames_taken += 1;
-            let pose = walk(self.started.elapsed().as_secs_f64());
-            let taken = unix_now();
-            let camera = Camera::new(self.intrinsics, &pose, &sample.camera);
-            let image = render(&sample.scene, &camera, &sample.settings);
-            next = Instant::now().max(next + request.spacing);
-            deliver(CapturedFrame {
-                frame: Frame::Rgb(image),
-                taken,
-                camera: Some(sample.camera),
-                truth: Some(pose),
-            });
-            delivered += 1;
+        earliest: Instant,
+    ) -> Result<Option<Taken>, SourceError> {
+        if !request.sleep_until(earliest) {
+            return Ok(None);
         }
-        if delivered == 0 {
-            return Err(SourceError::Stopped);
-        }
-        Ok(delivered)
+        let at = Instant::now();
+        let sample = self.randomisation.sample(&self.field, self.seed, self.frames_taken, 1);
+        self.frames_taken += 1;
+        let pose = walk(self.started.elapsed().as_secs_f64());
+        let taken = unix_now();
+        let camera = Camera::new(self.intrinsics, &pose, &sample.camera);
+        let image = render(&sample.scene, &camera, &sample.settings);
+        let frame =
+            CapturedFrame { frame: Frame::Rgb(image), taken, camera: Some(sample.camera), truth: Some(pose) };
+        Ok(Some(Taken { frame, at }))
     }
 }
 

@@ -14,7 +14,7 @@ use v4l::video::capture::Parameters;
 use v4l::{Format, FourCC};
 
 use super::v4l_format::{Negotiated, YUYV, backoff, candidate_devices, check_format, frame_from_buffer};
-use super::{CaptureRequest, CapturedFrame, FrameSource, SourceError, unix_now};
+use super::{CaptureRequest, CapturedFrame, FrameSource, SourceError, Taken, unix_now};
 use crate::frame::Frame;
 
 /// Driver buffers.
@@ -116,59 +116,57 @@ impl V4lSource {
 }
 
 impl FrameSource for V4lSource {
-    fn capture(
-        &mut self,
-        request: &CaptureRequest<'_>,
-        deliver: &mut dyn FnMut(CapturedFrame),
-    ) -> Result<usize, SourceError> {
-        let started = Instant::now();
-        let mut streaming = match self.streaming.take() {
-            Some(mut streaming) => {
+    fn start(&mut self, request: &CaptureRequest<'_>) -> Result<(), SourceError> {
+        match &mut self.streaming {
+            Some(streaming) => {
                 // Buffers filled while nobody looked are stale.
                 for _ in 0..BUFFERS {
                     let _ = streaming.stream.next();
                 }
-                streaming
             }
-            None => self.open_with_retries(request)?,
-        };
-        let mut delivered = 0;
-        let mut failure = None;
-        let mut next = Instant::now();
-        while delivered < request.count && Instant::now() < request.deadline && !request.stopped() {
-            let (buffer, metadata) = match streaming.stream.next() {
-                Ok(frame) => frame,
-                Err(error) => {
-                    failure = Some(format!("streaming failed: {error}"));
-                    break;
-                }
-            };
-            if Instant::now() < next {
+            None => self.streaming = Some(self.open_with_retries(request)?),
+        }
+        Ok(())
+    }
+
+    fn next_frame(
+        &mut self,
+        request: &CaptureRequest<'_>,
+        earliest: Instant,
+    ) -> Result<Option<Taken>, SourceError> {
+        let device = self.devices[0].display().to_string();
+        let streaming = self
+            .streaming
+            .as_mut()
+            .ok_or_else(|| SourceError::Camera { device: device.clone(), reason: "not streaming".into() })?;
+        while Instant::now() < request.deadline && !request.stopped() {
+            let (buffer, metadata) = streaming.stream.next().map_err(|error| SourceError::Camera {
+                device: device.clone(),
+                reason: format!("streaming failed: {error}"),
+            })?;
+            let at = Instant::now();
+            if at < earliest {
                 continue;
             }
             match frame_from_buffer(buffer, metadata.bytesused as usize, &streaming.format) {
                 Ok(image) => {
-                    next = Instant::now() + request.spacing;
-                    deliver(CapturedFrame {
+                    let frame = CapturedFrame {
                         frame: Frame::Yuyv(image),
                         taken: unix_now(),
                         camera: None,
                         truth: None,
-                    });
-                    delivered += 1;
+                    };
+                    return Ok(Some(Taken { frame, at }));
                 }
                 Err(reason) => warn!("camera {}: frame dropped: {reason}", streaming.path.display()),
             }
         }
-        if failure.is_none() && self.keep_streaming {
-            self.streaming = Some(streaming);
-        }
-        match (delivered == 0, failure) {
-            (false, _) => Ok(delivered),
-            (true, Some(reason)) => {
-                Err(SourceError::Camera { device: self.devices[0].display().to_string(), reason })
-            }
-            (true, None) => Err(SourceError::Timeout(started.elapsed())),
+        Ok(None)
+    }
+
+    fn finish(&mut self, failed: bool) {
+        if failed || !self.keep_streaming {
+            self.streaming = None;
         }
     }
 }

@@ -2,7 +2,7 @@
 //! symmetric hypotheses the camera supports. It never moves or invents a pose; it only tells the
 //! symmetric twins apart, which the image alone cannot do on a symmetric field.
 
-use super::fusion::FusedHypothesis;
+use super::Hypothesis;
 use crate::geometry::FieldPose;
 use crate::geometry::angle::angle_distance;
 
@@ -55,7 +55,7 @@ impl PlacementPrior {
     }
 
     /// Multiplies each hypothesis' weight by the prior, renormalises, and sorts heaviest first.
-    pub fn apply(&self, hypotheses: &mut [FusedHypothesis]) {
+    pub fn apply(&self, hypotheses: &mut [Hypothesis]) {
         for hypothesis in hypotheses.iter_mut() {
             hypothesis.weight *= self.likelihood(&hypothesis.pose);
         }
@@ -70,14 +70,13 @@ impl PlacementPrior {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::Symmetry;
-    use crate::relocaliser::PoseSigma;
+    use crate::geometry::{PoseSigma, Symmetry};
 
-    fn twins(pose: FieldPose) -> Vec<FusedHypothesis> {
+    fn twins(pose: FieldPose) -> Vec<Hypothesis> {
         let sigma = PoseSigma { x: 0.3, y: 0.3, theta: 0.1 };
         [pose, Symmetry::PointReflection.apply(&pose)]
             .into_iter()
-            .map(|pose| FusedHypothesis { pose, weight: 0.5, sigma, lines: None })
+            .map(|pose| Hypothesis { pose, weight: 0.5, sigma, lines: None })
             .collect()
     }
 

@@ -13,12 +13,11 @@ use anyhow::{Context, bail};
 use tokio::sync::oneshot;
 use tracing::{info, warn};
 
-use crate::daemon::config::{CameraConfig, SourceSpec};
-use crate::daemon::sockets;
-use crate::daemon::source::forwarded::{self, ForwardedSource, FrameQueue};
-use crate::daemon::source::sim::SimSource;
-use crate::daemon::source::{CaptureRequest, FrameSource, SourceError, sleep_unless_stopped};
-use crate::daemon::status::Status;
+use super::config::{CameraConfig, SimConfig, SourceSpec};
+use super::sockets;
+use super::source::forwarded::{self, FrameQueue};
+use super::source::{self as sources, CaptureRequest, SourceError, SourceSettings, sleep_unless_stopped};
+use super::status::Status;
 use crate::geometry::{FieldDimensions, FieldModel};
 use crate::recording::{FrameFormat, FrameRecord, RecordingWriter};
 
@@ -66,9 +65,20 @@ pub fn record(options: &RecordOptions, mut on_frame: impl FnMut(u64)) -> anyhow:
     if options.count == 0 {
         bail!("--count 0: nothing to record");
     }
+    if let SourceSpec::Replay(_) = options.source {
+        bail!("a recording is already recorded: copy its directory instead");
+    }
     let status = Arc::new(Status::new(options.source.to_string(), String::new()));
     let background = Background::start(&options.source, options.queue, status.clone())?;
-    let mut source = open_source(&options.source, &options.camera, background.queue.clone())?;
+    // The simulator films at the camera's size here: a recording stands in for the camera.
+    let camera = &options.camera;
+    let settings = SourceSettings {
+        camera: camera.clone(),
+        sim: SimConfig { width: camera.width, height: camera.height, seed: 1 },
+        field: FieldModel::new(FieldDimensions::spl_2025()),
+        looping: false,
+    };
+    let mut source = sources::open(&options.source, &settings, background.queue.clone())?;
     let mut writer = RecordingWriter::create(&options.out)?;
     info!(source = %options.source, out = %options.out.display(), "recording");
 
@@ -91,7 +101,7 @@ pub fn record(options: &RecordOptions, mut on_frame: impl FnMut(u64)) -> anyhow:
             stop: &background.stop,
         };
         let mut captured = Vec::with_capacity(1);
-        match source.capture(&request, &mut |frame| captured.push(frame)) {
+        match sources::capture(source.as_mut(), &request, &mut |frame| captured.push(frame)) {
             Ok(_) => {}
             Err(SourceError::Timeout(waited)) => {
                 warn!("no frame from {} for {:.1} s", options.source, waited.as_secs_f64());
@@ -124,44 +134,6 @@ pub fn record(options: &RecordOptions, mut on_frame: impl FnMut(u64)) -> anyhow:
         seconds: first.map_or(0.0, |first| last - first),
         rejected: status.snapshot().rejected.frames,
     })
-}
-
-fn open_source(
-    spec: &SourceSpec,
-    camera: &CameraConfig,
-    queue: Option<Arc<FrameQueue>>,
-) -> anyhow::Result<Box<dyn FrameSource>> {
-    match (spec, queue) {
-        (SourceSpec::Frames(_), Some(queue)) => Ok(Box::new(ForwardedSource::new(queue))),
-        (SourceSpec::Sim, _) => {
-            let field = FieldModel::new(FieldDimensions::spl_2025());
-            Ok(Box::new(SimSource::new(field, camera.width, camera.height, 1)))
-        }
-        (SourceSpec::V4l(device), _) => v4l_source(device, camera),
-        (SourceSpec::Replay(_), _) => bail!("a recording is already recorded: copy its directory instead"),
-        (SourceSpec::Frames(_), None) => unreachable!("Background::start listens for forwarded frames"),
-    }
-}
-
-#[cfg(feature = "v4l")]
-fn v4l_source(device: &std::path::Path, camera: &CameraConfig) -> anyhow::Result<Box<dyn FrameSource>> {
-    let source = crate::daemon::source::v4l::V4lSource::new(
-        device.to_path_buf(),
-        camera.width,
-        camera.height,
-        camera.fps,
-        true,
-    );
-    Ok(Box::new(source))
-}
-
-#[cfg(not(feature = "v4l"))]
-fn v4l_source(device: &std::path::Path, _: &CameraConfig) -> anyhow::Result<Box<dyn FrameSource>> {
-    bail!(
-        "v4l:{}: this relocd was built without V4L2 capture; rebuild with `--features v4l` \
-         (deploy/build-nao.sh does)",
-        device.display()
-    )
 }
 
 /// A thread with a small tokio runtime: turns SIGINT/SIGTERM into `stop`, and listens for forwarded
