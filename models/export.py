@@ -2,11 +2,15 @@
 calibrated on rendered frames) and writes a parity fixture of onnxruntime's outputs.
 
     python models/export.py --run RUN_DIR --calibration DATA/val [DATA/val-realism ...] \
-        --name squeezenet-half-point --data 1000:16000:black --data 1001:16000:hall-realism [--keep-fp32]
+        --name squeezenet-half-point --data 1000:16000:black --data 1001:16000:hall-realism [--keep-fp32] \
+        [--camera-height 0.38,0.55 --camera-pitch=-10,25 --max-camera-roll 5]
 
 --data names each training recording as SEED:FRAMES:KIND (KIND: black, asymmetric or hall-realism, the
-`relocd render` surroundings) for the contract; calibration frames are shared equally between the
-calibration recordings.
+`relocd render` surroundings) for the contract, and --camera-height/--camera-pitch/--max-camera-roll
+the camera range the training frames were rendered with (the flags given to `relocd render`; their
+defaults are the renderer's); calibration frames are shared equally between the calibration recordings.
+The run's sigma calibration (train.py) is built into the graph's position_sigma and heading_kappa and
+recorded in the contract.
 
 Writes models/<name>.int8.onnx (and models/<name>.fp32.onnx with --keep-fp32), and
 models/fixtures/parity/<name>.json with onnxruntime's outputs for the checked-in parity frames.
@@ -62,10 +66,22 @@ def contract(args, log, representation, name, quantisation):
             "continued_from": log.get("continued_from"),
             "data": [{"renderer": "relocd render", "seed": seed, "frames": frames, "size": "160x120",
                       "surroundings": kind} for seed, frames, kind in args.data],
+            "camera_range": {"height_m": list(args.camera_height), "pitch_deg_down": list(args.camera_pitch),
+                             "max_roll_deg": args.max_camera_roll},
+            "device": log.get("device", "cpu"), "batch": int(train_args.get("batch") or 64),
+            "sigma_calibration": log.get("sigma_calibration"),
             "calibration": {"recordings": [path.name for path in args.calibration], "frames": args.calibration_frames},
             "quantisation": quantisation,
         },
     }
+
+
+def value_range(text):
+    """Parses LOW,HIGH (as `relocd render` takes its ranges)."""
+    low, high = (float(value) for value in text.split(","))
+    if low > high:
+        raise argparse.ArgumentTypeError(f"{text}: expected LOW,HIGH with LOW <= HIGH")
+    return low, high
 
 
 def data_set(text):
@@ -91,20 +107,28 @@ def main():
                         help="a training recording as SEED:FRAMES:KIND, once per recording")
     parser.add_argument("--version", type=int, default=1, help="model version, in the model id (raise it on every retrain)")
     parser.add_argument("--keep-fp32", action="store_true")
+    parser.add_argument("--camera-height", type=value_range, default=(0.45, 0.53),
+                        help="camera height range of the training frames, m (render's --camera-height)")
+    parser.add_argument("--camera-pitch", type=value_range, default=(0.0, 20.0),
+                        help="camera pitch range of the training frames, degrees down (render's --camera-pitch)")
+    parser.add_argument("--max-camera-roll", type=float, default=3.0,
+                        help="largest camera roll of the training frames, degrees (render's --max-camera-roll)")
     args = parser.parse_args()
 
     log = json.loads((args.run / "training.json").read_text())
     train_args = log["args"]
     representation = train_args["representation"]
     net = RelocNet(train_args["arch"], float(train_args["width"]), representation)
-    net.load_state_dict(torch.load(args.run / "weights.pt"))
+    net.load_state_dict(torch.load(args.run / "weights.pt", map_location="cpu"))
     net.eval()
+    scales = log.get("sigma_calibration") or {}
+    exported = Exported(net, scales.get("position_sigma_scale", 1.0), scales.get("heading_kappa_scale", 1.0))
     names = output_names(representation)
 
     with tempfile.TemporaryDirectory() as scratch:
         scratch = Path(scratch)
         fp32 = scratch / "fp32.onnx"
-        torch.onnx.export(Exported(net), torch.zeros(1, 3, 120, 160), str(fp32), dynamo=False, opset_version=13,
+        torch.onnx.export(exported, torch.zeros(1, 3, 120, 160), str(fp32), dynamo=False, opset_version=13,
                           input_names=["image"], output_names=names, do_constant_folding=True)
         prepared = scratch / "prepared.onnx"
         quant_pre_process(str(fp32), str(prepared))

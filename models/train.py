@@ -2,9 +2,19 @@
 
     python models/train.py --train DATA/train [DATA/train-realism ...] --val DATA/val [...] \
         --arch squeezenet --width 0.5 --representation half-point --epochs 20 --seed 1 \
-        --out models/build/squeezenet-half-point
+        --out models/build/squeezenet-half-point [--device auto|cuda|cpu]
 
 Several training (or validation) recordings are concatenated in the order given.
+
+Devices: on the CPU (the default when no GPU is present) it trains exactly as it always has (batch 64,
+fp32). With `--device cuda` (or `auto` when a GPU is present) the frames, targets and augmentation
+live on the GPU, the forward and backward passes run in bf16 autocast, and the batch defaults to 256;
+the recipe (loss, augmentation, schedule, seeds) is the same, the random streams are the GPU's.
+
+After the last epoch the predicted uncertainties are calibrated on the validation frames (never the
+test sets): one scale for the position sigma and one for the heading's 1/sqrt(kappa), each the smallest
+factor >= 1 that leaves at most 2% of the validation frames beyond 3 sigma. training.json keeps them
+and export.py builds them into the exported graph.
 
 Loss (no hand-tuned weights): a per-frame Gaussian negative log-likelihood for the position and a von
 Mises one for the heading, each with its own predicted uncertainty (Kendall & Gal 2017's heteroscedastic
@@ -15,6 +25,7 @@ mirror pose), brightness, contrast, white balance and noise.
 """
 
 import argparse
+import copy
 import json
 import math
 import time
@@ -29,6 +40,8 @@ from relocnet.fold import fold, mirror_long_axis
 from relocnet.nets import RelocNet, count_macs, count_parameters
 
 BETA = 0.5
+# Share of validation frames allowed beyond 3 sigma after calibration (the target on test is <= 5%).
+CALIBRATION_SHARE = 0.02
 
 
 def folded_targets(poses, representation, flipped):
@@ -46,17 +59,18 @@ def to_input(images_uint8):
 
 
 def augment_photometric(x, generator):
-    """Brightness, contrast, per-channel gain and noise on normalised inputs."""
-    n = x.shape[0]
+    """Brightness, contrast, per-channel gain and noise on normalised inputs (on x's device, drawn from
+    `generator`, which lives there too)."""
+    n, device = x.shape[0], x.device
     rgb = x * 0.25 + 0.5
-    gain = torch.empty(n, 1, 1, 1).uniform_(0.75, 1.25, generator=generator)
-    channel = torch.empty(n, 3, 1, 1).uniform_(0.9, 1.1, generator=generator)
-    contrast = torch.empty(n, 1, 1, 1).uniform_(0.8, 1.2, generator=generator)
+    gain = torch.empty(n, 1, 1, 1, device=device).uniform_(0.75, 1.25, generator=generator)
+    channel = torch.empty(n, 3, 1, 1, device=device).uniform_(0.9, 1.1, generator=generator)
+    contrast = torch.empty(n, 1, 1, 1, device=device).uniform_(0.8, 1.2, generator=generator)
     mean = rgb.mean(dim=(1, 2, 3), keepdim=True)
     rgb = (rgb - mean) * contrast + mean
     rgb = rgb * gain * channel
-    noise = torch.empty(n, 1, 1, 1).uniform_(0.0, 0.02, generator=generator)
-    rgb = rgb + torch.randn(rgb.shape, generator=generator) * noise
+    noise = torch.empty(n, 1, 1, 1, device=device).uniform_(0.0, 0.02, generator=generator)
+    rgb = rgb + torch.randn(rgb.shape, generator=generator, device=device) * noise
     return ((rgb.clamp(0, 1) - 0.5) / 0.25).contiguous(memory_format=torch.channels_last)
 
 
@@ -75,27 +89,103 @@ def losses(outputs, targets, bits):
 
 
 @torch.no_grad()
-def evaluate(net, images, targets, bits, batch=256):
+def predict(net, images, targets, batch=256):
+    """Per-frame location error (m), heading error (rad), position sigma (m), kappa and fold
+    probabilities on (images, targets), in fp32."""
     net.eval()
-    location, heading, fold_error = [], [], []
+    location, heading, sigma, kappa, fold = [], [], [], [], []
     for start in range(0, len(images), batch):
         x = to_input(images[start : start + batch])
-        position, head, fold_logits, _, _ = net(x)
+        position, head, fold_logits, log_sigma, log_kappa = net(x)
         t = targets[start : start + batch]
         location.append((position - t[:, :2]).norm(dim=1))
-        heading.append(torch.rad2deg(torch.acos((head * t[:, 2:4]).sum(1).clamp(-1, 1))))
-        if bits.shape[1]:
-            fold_error.append(((torch.sigmoid(fold_logits) > 0.5).float() != bits[start : start + batch]).float().mean(1))
+        heading.append(torch.acos((head * t[:, 2:4]).sum(1).clamp(-1, 1)))
+        sigma.append(torch.exp(log_sigma[:, 0]))
+        kappa.append(torch.exp(log_kappa[:, 0]))
+        fold.append(torch.sigmoid(fold_logits))
     net.train()
+    return tuple(torch.cat(parts) for parts in (location, heading, sigma, kappa, fold))
+
+
+def evaluate(net, images, targets, bits, batch=256):
+    location, heading, sigma, kappa, fold = predict(net, images, targets, batch)
+    heading = torch.rad2deg(heading)
     result = {
-        "location_median_m": torch.cat(location).median().item(),
-        "location_mean_m": torch.cat(location).mean().item(),
-        "heading_median_deg": torch.cat(heading).median().item(),
-        "heading_mean_deg": torch.cat(heading).mean().item(),
+        "location_median_m": location.median().item(),
+        "location_mean_m": location.mean().item(),
+        "heading_median_deg": heading.median().item(),
+        "heading_mean_deg": heading.mean().item(),
+        "beyond_3_sigma": (location > 3 * sigma).float().mean().item(),
     }
-    if fold_error:
-        result["fold_error_mean"] = torch.cat(fold_error).mean().item()
+    if bits.shape[1]:
+        result["fold_error_mean"] = ((fold > 0.5).float() != bits).float().mean().item()
     return result
+
+
+def calibrate(net, images, targets):
+    """Scales for the position sigma and the heading's 1/sqrt(kappa): the smallest factors >= 1 that
+    leave at most CALIBRATION_SHARE of the frames beyond 3 sigma (on validation frames)."""
+    location, heading, sigma, kappa, _ = predict(net, images, targets)
+    position_ratio = (location / sigma).double().cpu().numpy()
+    heading_ratio = (heading * kappa.sqrt()).double().cpu().numpy()
+    quantile = 1 - CALIBRATION_SHARE
+    position_scale = max(1.0, float(np.quantile(position_ratio, quantile)) / 3)
+    heading_scale = max(1.0, float(np.quantile(heading_ratio, quantile)) / 3)
+    share = lambda ratio, scale: float((ratio > 3 * scale).mean())  # noqa: E731
+    return {
+        "position_sigma_scale": position_scale,
+        "heading_kappa_scale": 1 / heading_scale**2,
+        "validation_frames": len(position_ratio),
+        "target_share_beyond_3_sigma": CALIBRATION_SHARE,
+        "validation_beyond_3_sigma": {
+            "position_before": share(position_ratio, 1.0), "position_after": share(position_ratio, position_scale),
+            "heading_before": share(heading_ratio, 1.0), "heading_after": share(heading_ratio, heading_scale),
+        },
+    }
+
+
+def train_step(net, optimiser, images, targets, generator, cuda):
+    """One step of the recipe on a batch of uint8 frames: flips, photometric augmentation, loss, update.
+    Returns the three loss terms."""
+    index, train_images = images
+    flip = torch.rand(len(index), generator=generator, device=train_images.device) < 0.5
+    batch = train_images[index]
+    batch = torch.where(flip[:, None, None, None], batch.flip(2), batch)
+    t = torch.where(flip[:, None], targets[1][0][index], targets[0][0][index])
+    b = torch.where(flip[:, None], targets[1][1][index], targets[0][1][index])
+    x = augment_photometric(to_input(batch), generator)
+    if cuda:
+        with torch.autocast("cuda", dtype=torch.bfloat16):
+            outputs = net(x)
+        parts = losses([output.float() for output in outputs], t, b)
+    else:
+        parts = losses(net(x), t, b)
+    loss = sum(parts)
+    optimiser.zero_grad(set_to_none=True)
+    loss.backward()
+    optimiser.step()
+    return parts
+
+
+def seconds_per_step(net, args, train_images, targets, device, cuda, warmup=5, steps=20):
+    """Times training steps on a throw-away copy of the net (the run's random streams are restored)."""
+    states = (torch.get_rng_state(), torch.cuda.get_rng_state(device) if cuda else None)
+    probe = copy.deepcopy(net)
+    optimiser = torch.optim.AdamW(probe.parameters(), lr=0.0)
+    generator = torch.Generator(device=device).manual_seed(12345)
+    for step in range(warmup + steps):
+        if step == warmup:
+            if cuda:
+                torch.cuda.synchronize(device)
+            started = time.time()
+        index = torch.randint(len(train_images), (args.batch,), generator=generator, device=device)
+        train_step(probe, optimiser, (index, train_images), targets, generator, cuda)
+    if cuda:
+        torch.cuda.synchronize(device)
+    torch.set_rng_state(states[0])
+    if cuda:
+        torch.cuda.set_rng_state(states[1], device)
+    return (time.time() - started) / steps
 
 
 def main():
@@ -106,70 +196,92 @@ def main():
     parser.add_argument("--width", type=float, default=0.5)
     parser.add_argument("--representation", default="half-point")
     parser.add_argument("--epochs", type=int, default=20)
-    parser.add_argument("--batch", type=int, default=64)
+    parser.add_argument("--batch", type=int, help="frames per step (default 64 on the CPU, 256 on a GPU)")
     parser.add_argument("--lr", type=float, default=3e-3)
     parser.add_argument("--weight-decay", type=float, default=1e-4)
     parser.add_argument("--seed", type=int, default=1)
-    parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--threads", type=int, default=2, help="CPU threads")
+    parser.add_argument("--device", choices=["auto", "cuda", "cpu"], default="auto",
+                        help="cuda: GPU with bf16 autocast and the data on the GPU; auto: cuda when present")
     parser.add_argument("--limit", type=int, default=0, help="use only the first N frames of each training recording (0: all)")
+    parser.add_argument("--time-budget", type=float, default=0,
+                        help="seconds of training: times a few steps first and trains min(--epochs, what fits) epochs "
+                             "(the number is logged; pass it as --epochs to repeat the run)")
     parser.add_argument("--init", type=Path, help="continue from this run directory's weights.pt (a new schedule)")
     parser.add_argument("--out", required=True, type=Path)
     args = parser.parse_args()
 
+    if args.device == "auto":
+        args.device = "cuda" if torch.cuda.is_available() else "cpu"
+    device = torch.device(args.device)
+    cuda = device.type == "cuda"
+    if args.batch is None:
+        args.batch = 256 if cuda else 64
     torch.manual_seed(args.seed)
     np.random.seed(args.seed)
     torch.set_num_threads(args.threads)
-    generator = torch.Generator().manual_seed(args.seed)
+    generator = torch.Generator(device=device).manual_seed(args.seed)
+    if cuda:
+        torch.backends.cudnn.benchmark = True
     args.out.mkdir(parents=True, exist_ok=True)
 
     train_images, train_poses = load_recordings(args.train, args.limit)
     val_images, val_poses = load_recordings(args.val)
-    train_images = torch.from_numpy(train_images)
-    targets = [folded_targets(train_poses, args.representation, flipped) for flipped in (False, True)]
-    val_targets, val_bits = folded_targets(val_poses, args.representation, False)
-    val_images = torch.from_numpy(val_images)
+    train_images = torch.from_numpy(train_images).to(device)
+    targets = [tuple(t.to(device) for t in folded_targets(train_poses, args.representation, flipped))
+               for flipped in (False, True)]
+    val_targets, val_bits = (t.to(device) for t in folded_targets(val_poses, args.representation, False))
+    val_images = torch.from_numpy(val_images).to(device)
 
     net = RelocNet(args.arch, args.width, args.representation).to(memory_format=torch.channels_last)
     if args.init:
-        net.load_state_dict(torch.load(args.init / "weights.pt"))
+        net.load_state_dict(torch.load(args.init / "weights.pt", map_location="cpu"))
         print(f"continuing from {args.init}")
     macs, parameters = count_macs(net), count_parameters(net)
-    print(f"{args.arch} width {args.width} {args.representation}: {macs / 1e6:.1f} M MACs, {parameters / 1e6:.2f} M parameters")
+    net.to(device)
+    print(f"{args.arch} width {args.width} {args.representation}: {macs / 1e6:.1f} M MACs, {parameters / 1e6:.2f} M parameters;"
+          f" {len(train_images)} training frames, batch {args.batch}, on {device}"
+          + (f" ({torch.cuda.get_device_name(device)}, bf16 autocast)" if cuda else f" ({args.threads} threads)"), flush=True)
     steps_per_epoch = len(train_images) // args.batch
+    budget = None
+    if args.time_budget > 0:
+        step_seconds = seconds_per_step(net, args, train_images, targets, device, cuda)
+        # 5% for the validation pass after each epoch.
+        fitting = int(args.time_budget / (1.05 * step_seconds * steps_per_epoch))
+        budget = {"seconds": args.time_budget, "measured_seconds_per_step": round(step_seconds, 5),
+                  "requested_epochs": args.epochs, "epochs": max(1, min(args.epochs, fitting))}
+        args.epochs = budget["epochs"]
+        print(f"time budget {args.time_budget:.0f} s at {step_seconds * 1e3:.1f} ms per step: {args.epochs} epochs", flush=True)
     optimiser = torch.optim.AdamW(net.parameters(), lr=args.lr, weight_decay=args.weight_decay)
     schedule = torch.optim.lr_scheduler.OneCycleLR(
         optimiser, max_lr=args.lr, total_steps=args.epochs * steps_per_epoch, pct_start=0.15
     )
     log = {"args": {k: str(v) for k, v in vars(args).items()}, "macs": macs, "parameters": parameters, "epochs": []}
+    if budget:
+        log["time_budget"] = budget
     if args.init:
         earlier = json.loads((args.init / "training.json").read_text())
         log["continued_from"] = {"run": args.init.name, "epochs": len(earlier["epochs"]),
                                  "train_seconds": earlier["train_seconds"], "lr": earlier["args"]["lr"]}
     started = time.time()
     for epoch in range(args.epochs):
-        order = torch.randperm(len(train_images), generator=generator)
-        totals = torch.zeros(3)
+        order = torch.randperm(len(train_images), generator=generator, device=device)
+        totals = torch.zeros(3, device=device)
         for step in range(steps_per_epoch):
             index = order[step * args.batch : (step + 1) * args.batch]
-            flip = torch.rand(len(index), generator=generator) < 0.5
-            images = train_images[index]
-            images = torch.where(flip[:, None, None, None], images.flip(2), images)
-            t = torch.where(flip[:, None], targets[1][0][index], targets[0][0][index])
-            b = torch.where(flip[:, None], targets[1][1][index], targets[0][1][index])
-            x = augment_photometric(to_input(images), generator)
-            parts = losses(net(x), t, b)
-            loss = sum(parts)
-            optimiser.zero_grad(set_to_none=True)
-            loss.backward()
-            optimiser.step()
+            parts = train_step(net, optimiser, (index, train_images), targets, generator, cuda)
             schedule.step()
-            totals += torch.tensor([p.item() for p in parts])
+            totals += torch.stack([p.detach().float() for p in parts])
         metrics = evaluate(net, val_images, val_targets, val_bits)
-        entry = {"epoch": epoch + 1, "seconds": round(time.time() - started, 1), "loss": (totals / steps_per_epoch).tolist(), "val": metrics}
+        entry = {"epoch": epoch + 1, "seconds": round(time.time() - started, 1),
+                 "loss": (totals / steps_per_epoch).tolist(), "val": metrics}
         log["epochs"].append(entry)
         print(json.dumps(entry), flush=True)
-        torch.save(net.state_dict(), args.out / "weights.pt")
+        torch.save({k: v.cpu() for k, v in net.state_dict().items()}, args.out / "weights.pt")
     log["train_seconds"] = round(time.time() - started, 1)
+    log["device"] = torch.cuda.get_device_name(device) if cuda else f"cpu, {args.threads} threads"
+    log["sigma_calibration"] = calibrate(net, val_images, val_targets)
+    print(json.dumps({"sigma_calibration": log["sigma_calibration"]}), flush=True)
     (args.out / "training.json").write_text(json.dumps(log, indent=1))
 
 

@@ -1,10 +1,25 @@
 """Reading relocd recordings (frames.jsonl + frame files) into arrays, cached beside the recording."""
 
 import json
+import os
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
 from PIL import Image
+
+# Recordings with more frames than this are decoded by several processes (one per core).
+PARALLEL_DECODE_FRAMES = 4000
+
+
+def _decode(directory, files, width, height):
+    images = np.empty((len(files), height, width, 3), np.uint8)
+    for i, file in enumerate(files):
+        image = Image.open(directory / file).convert("RGB")
+        if image.size != (width, height):
+            raise ValueError(f"{file} is {image.size}, expected {(width, height)}")
+        images[i] = np.asarray(image)
+    return images
 
 
 def load_recording(directory, width=160, height=120):
@@ -20,15 +35,17 @@ def load_recording(directory, width=160, height=120):
         cached = np.load(cache)
         return cached["images"], cached["poses"]
     records = [json.loads(line) for line in index.read_text().splitlines() if line.strip()]
-    images = np.empty((len(records), height, width, 3), np.uint8)
-    poses = np.empty((len(records), 3), np.float64)
-    for i, record in enumerate(records):
-        image = Image.open(directory / record["file"]).convert("RGB")
-        if image.size != (width, height):
-            raise ValueError(f"{record['file']} is {image.size}, expected {(width, height)}")
-        images[i] = np.asarray(image)
-        pose = record["pose"]
-        poses[i] = (pose["x"], pose["y"], pose["theta"])
+    files = [record["file"] for record in records]
+    workers = os.cpu_count() or 1
+    if len(files) > PARALLEL_DECODE_FRAMES and workers > 1:
+        chunk = -(-len(files) // workers)
+        with ProcessPoolExecutor(workers) as pool:
+            parts = pool.map(_decode, *zip(*[(directory, files[i : i + chunk], width, height)
+                                             for i in range(0, len(files), chunk)]))
+            images = np.concatenate(list(parts))
+    else:
+        images = _decode(directory, files, width, height)
+    poses = np.array([(r["pose"]["x"], r["pose"]["y"], r["pose"]["theta"]) for r in records], np.float64).reshape(-1, 3)
     np.savez(cache, images=images, poses=poses)
     return images, poses
 

@@ -107,18 +107,27 @@ class RelocNet(nn.Module):
 
 
 class Exported(nn.Module):
-    """What goes into the ONNX file: probabilities and uncertainties instead of logits and logs."""
+    """What goes into the ONNX file: probabilities and uncertainties instead of logits and logs, the
+    uncertainties scaled by the validation calibration (train.py's `calibrate`; 1 leaves them as
+    trained)."""
 
-    def __init__(self, net):
+    def __init__(self, net, position_sigma_scale=1.0, heading_kappa_scale=1.0):
         super().__init__()
         self.net = net
+        self.position_sigma_scale = float(position_sigma_scale)
+        self.heading_kappa_scale = float(heading_kappa_scale)
 
     def forward(self, image):
         position, heading, fold_logits, log_sigma, log_kappa = self.net(image)
         outputs = [position, heading]
         if self.net.bits:
             outputs.append(torch.sigmoid(fold_logits))
-        return (*outputs, torch.exp(log_sigma), torch.exp(log_kappa))
+        sigma, kappa = torch.exp(log_sigma), torch.exp(log_kappa)
+        if self.position_sigma_scale != 1.0:
+            sigma = sigma * self.position_sigma_scale
+        if self.heading_kappa_scale != 1.0:
+            kappa = kappa * self.heading_kappa_scale
+        return (*outputs, sigma, kappa)
 
 
 def output_names(representation):

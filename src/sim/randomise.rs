@@ -381,11 +381,50 @@ mod tests {
             assert!(field.is_on_carpet(frame.pose.position()));
             assert!(randomisation.camera_height.contains(&frame.camera.height()));
             assert!(randomisation.camera_pitch.contains(&frame.camera.pitch()));
+            assert!(randomisation.camera_roll.contains(&frame.camera.roll()));
             assert!(frame.scene.robots.len() <= randomisation.max_robots);
             for robot in &frame.scene.robots {
                 assert!(field.is_on_carpet(robot.position));
                 assert!((robot.position - frame.pose.position()).norm() > 0.35);
             }
         }
+    }
+
+    /// The range a real Nao's top camera covers (issue 18: crouched walk to standing, head pitch plus
+    /// torso): 0.38–0.55 m, 10° up to 25° down, rolled ±5°. Frames looking up stay valid and render.
+    #[test]
+    fn the_real_robot_camera_range_is_sampled_and_renders() {
+        use crate::geometry::{Camera, CameraIntrinsics};
+        use crate::sim::render::render;
+
+        let field = FieldModel::default();
+        let randomisation = Randomisation {
+            camera_height: 0.38..=0.55,
+            camera_pitch: -10f64.to_radians()..=25f64.to_radians(),
+            camera_roll: -5f64.to_radians()..=5f64.to_radians(),
+            hall_realism: true,
+            ..Randomisation::default()
+        };
+        let (mut up, mut beyond_old_roll) = (0, 0);
+        for index in 0..300 {
+            let frame = randomisation.sample(&field, 11, index, 1);
+            assert!(randomisation.camera_height.contains(&frame.camera.height()));
+            assert!(randomisation.camera_pitch.contains(&frame.camera.pitch()));
+            assert!(randomisation.camera_roll.contains(&frame.camera.roll()));
+            up += usize::from(frame.camera.pitch() < 0.0);
+            beyond_old_roll += usize::from(frame.camera.roll().abs() > 3f64.to_radians());
+        }
+        // 10 of 35 degrees look up, 2 of 5 degrees of roll lie beyond the old ±3°.
+        assert!((60..=115).contains(&up), "{up} of 300 frames look up");
+        assert!((80..=160).contains(&beyond_old_roll), "{beyond_old_roll} of 300 frames rolled beyond 3°");
+
+        let looking_up = (0..300)
+            .map(|index| randomisation.sample(&field, 11, index, 1))
+            .find(|frame| frame.camera.pitch() < -8f64.to_radians())
+            .expect("some frame looks up by more than 8°");
+        let intrinsics = CameraIntrinsics::nao_top().with_resolution(40, 30);
+        let camera = Camera::new(intrinsics, &looking_up.pose, &looking_up.camera);
+        let image = render(&looking_up.scene, &camera, &looking_up.settings);
+        assert_eq!((image.width(), image.height()), (40, 30));
     }
 }

@@ -143,26 +143,26 @@ fn sighup_keeps_the_running_model_over_a_corrupt_file_and_loads_a_valid_one() {
     let file = scratch.path().join("model.onnx");
     std::fs::copy(models.join("squeezenet-half-point.w8.onnx"), &file).unwrap();
     let daemon = Daemon::start("replay:{sample}", &["--burst", "1", "--model", file.to_str().unwrap()]);
-    assert_eq!(daemon.status()["model"], "squeezenet-half-point-w8-v2");
+    assert_eq!(daemon.status()["model"], "squeezenet-half-point-w8-v3");
 
     std::fs::write(&file, b"not an ONNX file at all").unwrap();
     daemon.hang_up();
     let status = daemon.status_when(|status| status["model_error"].is_string());
     assert!(status["model_error"].as_str().unwrap().contains("is not an ONNX file"), "{status}");
-    assert_eq!(status["model"], "squeezenet-half-point-w8-v2");
+    assert_eq!(status["model"], "squeezenet-half-point-w8-v3");
     assert!(daemon.control(br#"{"relocalise": {}}"#)["accepted"]["trigger"].is_u64());
     let message = daemon.message();
-    assert_eq!(message.model.id, "squeezenet-half-point-w8-v2");
+    assert_eq!(message.model.id, "squeezenet-half-point-w8-v3");
     assert!(message.failure.is_none());
 
     std::fs::copy(models.join("squeezenet-half-point.fp32.onnx"), &file).unwrap();
     daemon.hang_up();
     daemon.status_when(|status| {
-        status["model"] == "squeezenet-half-point-fp32-v2" && status["model_error"].is_null()
+        status["model"] == "squeezenet-half-point-fp32-v3" && status["model_error"].is_null()
     });
     std::thread::sleep(Duration::from_millis(200)); // past the harness's 100 ms rate limit
     assert!(daemon.control(br#"{"relocalise": {}}"#)["accepted"]["trigger"].is_u64());
-    assert_eq!(daemon.message().model.id, "squeezenet-half-point-fp32-v2");
+    assert_eq!(daemon.message().model.id, "squeezenet-half-point-fp32-v3");
     daemon.stop();
 }
 

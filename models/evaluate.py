@@ -1,0 +1,76 @@
+"""Evaluates exported models on rendered recordings with onnxruntime (no torch): the oracle errors
+(folded prediction against folded truth, as `relocd replay` reports them) and how well the predicted
+uncertainty covers them: the share of frames whose position error exceeds 3 position_sigma and whose
+heading error exceeds 3 / sqrt(heading_kappa).
+
+    python models/evaluate.py --model models/squeezenet-half-point.w8.onnx [--model ...] \
+        --data DATA/test DATA/test-realism [--json FILE]
+
+Prints one JSON line per (model, recording). Frames must be at the model's input size (160x120).
+`relocd replay --metrics-json` stays the reference for the accuracy figures; this adds the 3-sigma
+shares, which replay does not report.
+"""
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+import onnxruntime
+
+from relocnet.data import load_recording
+from relocnet.fold import fold
+from relocnet.onnxfile import normalise, read_contract
+
+
+def evaluate(session, names, representation, images, poses):
+    outputs = {name: [] for name in names}
+    for image in images:  # the exported graphs take one frame at a time
+        for name, value in zip(names, session.run(names, {"image": normalise(image[None])})):
+            outputs[name].append(value.reshape(-1))
+    outputs = {name: np.stack(values) for name, values in outputs.items()}
+    fx, fy, ftheta, _ = fold(poses[:, 0], poses[:, 1], poses[:, 2], representation)
+    location = np.hypot(outputs["position"][:, 0] - fx, outputs["position"][:, 1] - fy)
+    heading = np.arccos(np.clip(outputs["heading"][:, 0] * np.cos(ftheta) + outputs["heading"][:, 1] * np.sin(ftheta), -1, 1))
+    sigma = outputs["position_sigma"][:, 0]
+    kappa = outputs["heading_kappa"][:, 0]
+    return {
+        "frames": len(images),
+        "location_median_cm": round(float(np.median(location)) * 100, 1),
+        "location_mean_cm": round(float(np.mean(location)) * 100, 1),
+        "heading_median_deg": round(float(np.degrees(np.median(heading))), 2),
+        "heading_mean_deg": round(float(np.degrees(np.mean(heading))), 2),
+        "position_beyond_3_sigma": round(float(np.mean(location > 3 * sigma)), 4),
+        "heading_beyond_3_sigma": round(float(np.mean(heading > 3 / np.sqrt(kappa))), 4),
+        "position_sigma_median_cm": round(float(np.median(sigma)) * 100, 1),
+    }
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--model", required=True, type=Path, action="append")
+    parser.add_argument("--data", required=True, type=Path, nargs="+")
+    parser.add_argument("--limit", type=int, default=0, help="only the first N frames of each recording")
+    parser.add_argument("--json", type=Path, help="also write all results to this file")
+    args = parser.parse_args()
+    results = []
+    recordings = [(path, *load_recording(path)) for path in args.data]
+    for model in args.model:
+        contract = read_contract(model)
+        representation = contract["representation"]
+        options = onnxruntime.SessionOptions()
+        options.intra_op_num_threads = 1
+        session = onnxruntime.InferenceSession(str(model), options, providers=["CPUExecutionProvider"])
+        names = [output.name for output in session.get_outputs()]
+        for path, images, poses in recordings:
+            end = args.limit or None
+            result = {"model": model.name, "model_id": contract["model_id"], "data": path.name,
+                      **evaluate(session, names, representation, images[:end], poses[:end])}
+            print(json.dumps(result), flush=True)
+            results.append(result)
+    if args.json:
+        args.json.write_text(json.dumps(results, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()
