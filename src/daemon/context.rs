@@ -42,7 +42,7 @@ pub struct TriggerContext {
 }
 
 impl TriggerContext {
-    /// The context of a relocalise request; an errors for each part left out (the request's own and
+    /// The context of a relocalise request, and an error for each part left out (the request's own and
     /// a prior older than `max_age_s`).
     pub fn of_request(request: &RelocaliseRequest, max_age_s: f64) -> (Self, Vec<String>) {
         let mut errors = request.context_errors.clone();
