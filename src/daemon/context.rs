@@ -156,10 +156,10 @@ mod tests {
             ..Default::default()
         };
         let fall = event(TriggerKind::Fall, belief.clone());
-        let priors = priors_for_batch(&[fall.clone()], &config, false);
+        let priors = priors_for_batch(std::slice::from_ref(&fall), &config, false);
         assert!(priors.belief.is_some() && priors.placement.is_none() && priors.own_half.is_none());
         assert_eq!(priors.belief.unwrap().age_s, 1.0);
-        let goalkeeper = priors_for_batch(&[fall.clone()], &config, true);
+        let goalkeeper = priors_for_batch(std::slice::from_ref(&fall), &config, true);
         assert!(goalkeeper.own_half.is_some());
         let not_own_half =
             event(TriggerKind::Request, TriggerContext { own_half: Some(false), ..Default::default() });

@@ -218,7 +218,7 @@ mod tests {
             assert!(belief.pose.distance_to(&truth) <= 1.0 + 1e-9);
             assert!(
                 crate::geometry::angle::angle_distance(belief.pose.heading(), truth.heading())
-                    <= 0.5236 + 1e-9
+                    <= std::f64::consts::FRAC_PI_6 + 1e-9
             );
             let ball = priors.ball.unwrap();
             assert!((1..=1).contains(&ball.teammates) && ball.team_sigma > 0.0);
