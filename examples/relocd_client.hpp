@@ -433,6 +433,48 @@ class Subscriber {
   bool ok_ = false;
 };
 
+// A pose estimate for the belief stream or a request's prior: metres, radians, seconds (sigma > 0).
+struct PoseInput {
+  double x = 0.0, y = 0.0, theta = 0.0;
+  struct Sigma {
+    double x = 0.5, y = 0.5, theta = 0.3;
+  } sigma;
+  std::optional<double> age_s;
+};
+
+// The robot's own ball (distance m, bearing rad) and the team's (x, y, sigma m; teammates agreeing).
+struct BallInput {
+  double own_distance = 0.0, own_bearing = 0.0;
+  double team_x = 0.0, team_y = 0.0, team_sigma = 0.3;
+  int teammates = 1;
+};
+
+// Context of a relocalise request that tells the symmetric twins apart (docs/protocol.md).
+struct Context {
+  std::optional<PoseInput> prior;
+  std::optional<bool> own_half;
+  std::optional<BallInput> ball;
+};
+
+namespace detail {
+inline std::string number(double value) {
+  std::ostringstream text;
+  text.imbue(std::locale::classic());
+  text.precision(17);
+  text << value;
+  return text.str();
+}
+
+inline std::string pose_json(const PoseInput& pose) {
+  std::string text = "{\"x\": " + number(pose.x) + ", \"y\": " + number(pose.y) +
+                     ", \"theta\": " + number(pose.theta) + ", \"sigma\": {\"x\": " +
+                     number(pose.sigma.x) + ", \"y\": " + number(pose.sigma.y) +
+                     ", \"theta\": " + number(pose.sigma.theta) + "}";
+  if (pose.age_s) text += ", \"age_s\": " + number(*pose.age_s);
+  return text + "}";
+}
+}  // namespace detail
+
 // Asks relocd (its `control` address) to relocalise.
 class Control {
  public:
@@ -461,15 +503,34 @@ class Control {
   // Asks for a relocalisation; the trigger id the published message will list (the request's own, or
   // the waiting one it joined when relocd had too many waiting: "coalesced_into").
   std::optional<std::uint64_t> relocalise(const std::string& reason = "") {
-    std::string request = "{\"relocalise\": {";
+    return relocalise(reason, Context{}, nullptr);
+  }
+
+  // The same with context; what relocd could not use of it is left out and, when `context_errors` is
+  // given, named there (the relocalisation runs anyway).
+  std::optional<std::uint64_t> relocalise(const std::string& reason, const Context& context,
+                                          std::vector<std::string>* context_errors) {
+    std::vector<std::string> members;
     if (!reason.empty()) {
-      request += "\"reason\": \"";
+      std::string text = "\"reason\": \"";
       for (char c : reason) {
-        if (c == '"' || c == '\\') request += '\\';
-        if (static_cast<unsigned char>(c) >= 0x20) request += c;
+        if (c == '"' || c == '\\') text += '\\';
+        if (static_cast<unsigned char>(c) >= 0x20) text += c;
       }
-      request += "\"";
+      members.push_back(text + "\"");
     }
+    if (context.prior) members.push_back("\"prior\": {\"pose\": " + detail::pose_json(*context.prior) + "}");
+    if (context.own_half) members.push_back(std::string("\"own_half\": ") + (*context.own_half ? "true" : "false"));
+    if (context.ball) {
+      const BallInput& ball = *context.ball;
+      members.push_back("\"ball\": {\"own\": {\"distance\": " + detail::number(ball.own_distance) +
+                        ", \"bearing\": " + detail::number(ball.own_bearing) + "}, \"team\": {\"x\": " +
+                        detail::number(ball.team_x) + ", \"y\": " + detail::number(ball.team_y) +
+                        ", \"sigma\": " + detail::number(ball.team_sigma) +
+                        ", \"teammates\": " + std::to_string(ball.teammates) + "}}");
+    }
+    std::string request = "{\"relocalise\": {";
+    for (std::size_t i = 0; i < members.size(); ++i) request += (i ? ", " : "") + members[i];
     request += "}}";
     auto answer = ask(request);
     if (!answer) return std::nullopt;
@@ -477,7 +538,20 @@ class Control {
     auto trigger = whole_number(accepted ? accepted->get("coalesced_into") : nullptr);
     if (!trigger) trigger = whole_number(accepted ? accepted->get("trigger") : nullptr);
     if (!trigger) error_ = "unexpected answer from relocd";
+    const json::Value* errors = accepted ? accepted->get("context_errors") : nullptr;
+    if (context_errors) {
+      context_errors->clear();
+      if (errors)
+        for (const json::Value& error : errors->array) context_errors->push_back(error.string);
+    }
     return trigger;
+  }
+
+  // Sends the team's current pose estimate (the belief stream, 1-10 Hz): the last one from before a
+  // fall or pick-up becomes that relocalisation's prior. relocd does not answer.
+  bool belief(const PoseInput& pose) {
+    if (!ok_) return false;
+    return socket_.send_to("{\"belief\": " + detail::pose_json(pose) + "}", daemon_, &error_);
   }
 
  private:

@@ -226,6 +226,31 @@ class Control:
         joined = accepted.get("coalesced_into")
         return joined if isinstance(joined, int) else accepted["trigger"]
 
+    def relocalise_with(self, reason: Optional[str] = None, head_yaw: Optional[float] = None,
+                        prior: Optional[dict] = None, own_half: Optional[bool] = None,
+                        ball: Optional[dict] = None) -> dict:
+        """Asks for a relocalisation with context that tells the symmetric twins apart (docs/protocol.md,
+        "Relocalise context"): `prior` {"pose": {...}}, `own_half`, `ball` {"own": {...}, "team": {...}}.
+        Returns {"trigger": id the published message will list, "context_errors": [...]}: context relocd
+        could not use is left out and named there; the relocalisation runs anyway."""
+        request = {}
+        for key, value in (("reason", reason), ("head_yaw", head_yaw), ("prior", prior),
+                           ("own_half", own_half), ("ball", ball)):
+            if value is not None:
+                request[key] = value
+        accepted = self._ask({"relocalise": request}, "accepted")
+        if not isinstance(accepted, dict) or not isinstance(accepted.get("trigger"), int):
+            raise RelocdError(f"unexpected answer from relocd: {accepted!r}")
+        joined = accepted.get("coalesced_into")
+        return {"trigger": joined if isinstance(joined, int) else accepted["trigger"],
+                "context_errors": list(accepted.get("context_errors", []))}
+
+    def belief(self, pose: dict) -> None:
+        """Sends the team's current pose estimate {"x", "y", "theta", "sigma": {"x", "y", "theta"}[, "age_s"]}
+        (the belief stream, 1-10 Hz): the last one from before a fall or pick-up becomes that
+        relocalisation's prior. relocd does not answer; a refused belief is logged and counted there."""
+        self.socket.sendto(json.dumps({"belief": pose}).encode(), self.daemon)
+
     def status(self) -> dict:
         """relocd's counters, game state and last latencies."""
         return self._ask({"status": {}}, "status")

@@ -29,7 +29,10 @@ use std::time::{Duration, Instant};
 use thiserror::Error;
 
 pub use crate::protocol::address::Address;
-use crate::protocol::control::{ControlRequest, RelocaliseRequest, StatusRequest};
+pub use crate::protocol::control::{
+    BallInput, OwnBallInput, PoseInput, PriorInput, RelocaliseRequest, SigmaInput, TeamBallInput,
+};
+use crate::protocol::control::{ControlRequest, StatusRequest};
 pub use crate::protocol::message::{Hypothesis, Message, MessageError, Trigger, TriggerKind};
 
 /// Largest datagram relocd sends.
@@ -240,11 +243,32 @@ impl Control {
     /// (`coalesced_into`). `head_yaw` (radians, positive left) is the head yaw the frames will be taken
     /// with, if known.
     pub fn relocalise(&self, reason: Option<&str>, head_yaw: Option<f64>) -> Result<u64, ClientError> {
-        let request =
-            ControlRequest::Relocalise(RelocaliseRequest { reason: reason.map(str::to_owned), head_yaw });
-        let accepted = self.ask(&request, "accepted")?;
+        let request = RelocaliseRequest { reason: reason.map(str::to_owned), head_yaw, ..Default::default() };
+        Ok(self.relocalise_with(&request)?.trigger)
+    }
+
+    /// Asks relocd to relocalise now with context that tells the symmetric twins apart (`prior`,
+    /// `own_half`, `ball`; docs/protocol.md). Context relocd could not use is left out and named in
+    /// the answer's `context_errors`; the relocalisation runs anyway.
+    pub fn relocalise_with(&self, request: &RelocaliseRequest) -> Result<Accepted, ClientError> {
+        let accepted = self.ask(&ControlRequest::Relocalise(request.clone()), "accepted")?;
         let id = |key: &str| accepted.get(key).and_then(serde_json::Value::as_u64);
-        id("coalesced_into").or(id("trigger")).ok_or_else(|| ClientError::Unexpected(accepted.to_string()))
+        let trigger = id("coalesced_into")
+            .or(id("trigger"))
+            .ok_or_else(|| ClientError::Unexpected(accepted.to_string()))?;
+        let context_errors = accepted
+            .get("context_errors")
+            .and_then(serde_json::Value::as_array)
+            .map(|errors| errors.iter().filter_map(|e| e.as_str().map(str::to_owned)).collect())
+            .unwrap_or_default();
+        Ok(Accepted { trigger, context_errors })
+    }
+
+    /// Sends the team's current pose estimate (the belief stream, 1–10 Hz): relocd keeps it, and the
+    /// last one from before a fall or pick-up becomes that relocalisation's prior. Not answered; a
+    /// refused one is logged and counted by relocd.
+    pub fn belief(&self, pose: &PoseInput) -> Result<(), ClientError> {
+        self.send(&ControlRequest::Belief(*pose))
     }
 
     /// relocd's counters, game state and last latencies (see docs/protocol.md).
@@ -259,13 +283,7 @@ impl Control {
         self.socket.set_nonblocking(true)?;
         while self.socket.recv(&mut buffer).is_ok() {}
         self.socket.set_nonblocking(false)?;
-
-        let bytes = serde_json::to_vec(request).expect("a request is plain data");
-        match (&self.socket, &self.daemon) {
-            (Socket::Udp(socket), Address::Udp(address)) => socket.send_to(&bytes, address)?,
-            (Socket::Unix(socket, _), Address::Unix(path)) => socket.send_to(&bytes, path)?,
-            _ => unreachable!("connect binds a socket of the daemon's kind"),
-        };
+        self.send(request)?;
         let length = match self.socket.recv(&mut buffer) {
             Ok(length) => length,
             Err(error) if is_timeout(&error) => return Err(ClientError::Timeout(ANSWER_TIMEOUT)),
@@ -282,6 +300,25 @@ impl Control {
             .map(serde_json::Value::take)
             .ok_or_else(|| ClientError::Unexpected(text.into_owned()))
     }
+
+    fn send(&self, request: &ControlRequest) -> Result<(), ClientError> {
+        let bytes = serde_json::to_vec(request).expect("a request is plain data");
+        match (&self.socket, &self.daemon) {
+            (Socket::Udp(socket), Address::Udp(address)) => socket.send_to(&bytes, address)?,
+            (Socket::Unix(socket, _), Address::Unix(path)) => socket.send_to(&bytes, path)?,
+            _ => unreachable!("connect binds a socket of the daemon's kind"),
+        };
+        Ok(())
+    }
+}
+
+/// relocd's answer to a relocalise request.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Accepted {
+    /// The trigger id the published message will list.
+    pub trigger: u64,
+    /// Context left out, each naming its key and why.
+    pub context_errors: Vec<String>,
 }
 
 #[cfg(test)]
@@ -300,6 +337,7 @@ mod tests {
             model: ModelInfo { id: "m".into(), representation: Representation::HalfPoint },
             frames: FrameCounts { requested: 1, used: 0, agreeing: 0 },
             prior: None,
+            priors: vec![],
             latency_ms: Latency::default(),
             hypotheses: vec![],
             failure: Some("no frames".into()),
@@ -340,8 +378,10 @@ mod tests {
 
     #[test]
     fn control_requests_are_the_protocols_json() {
-        let request =
-            ControlRequest::Relocalise(RelocaliseRequest { reason: Some("lost".into()), head_yaw: None });
+        let request = ControlRequest::Relocalise(RelocaliseRequest {
+            reason: Some("lost".into()),
+            ..RelocaliseRequest::default()
+        });
         assert_eq!(serde_json::to_string(&request).unwrap(), r#"{"relocalise":{"reason":"lost"}}"#);
         assert_eq!(
             serde_json::to_string(&ControlRequest::Status(StatusRequest {})).unwrap(),

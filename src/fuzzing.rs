@@ -46,9 +46,20 @@ pub fn lola(bytes: &[u8]) {
     }
 }
 
-/// A control request: a parsed request serialises to JSON that parses to the same request.
+/// A control request: a parsed request serialises to JSON that parses to the same request (context
+/// that was left out with an error is gone from both, so the second parse finds no error), and
+/// every context value kept is within its checked range.
 pub fn control(bytes: &[u8]) {
-    if let Ok(request) = ControlRequest::parse(bytes) {
+    if let Ok(mut request) = ControlRequest::parse(bytes) {
+        if let ControlRequest::Relocalise(relocalise) = &mut request {
+            if let Some(prior) = &relocalise.prior {
+                assert!(prior.pose.validate("prior").is_ok());
+            }
+            if let Some(ball) = &relocalise.ball {
+                assert!(ball.validate().is_ok());
+            }
+            relocalise.context_errors.clear();
+        }
         let json = serde_json::to_vec(&request).expect("a request serialises");
         assert_eq!(ControlRequest::parse(&json), Ok(request));
     }

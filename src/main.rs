@@ -15,7 +15,8 @@ use relocd::bench::Stage;
 use relocd::daemon::config::{Config, Listen, SensorInput, SourceSpec};
 use relocd::daemon::record::RecordOptions;
 use relocd::geometry::{CameraIntrinsics, FieldDimensions, FieldModel, Representation};
-use relocd::pipeline::{Pipeline, PlacementPrior};
+use relocd::pipeline::Pipeline;
+use relocd::pipeline::priors::simulate::PriorSpec;
 use relocd::protocol::address::Address;
 use relocd::protocol::message::Encoding;
 use relocd::recording::{FrameFormat, Recording};
@@ -248,10 +249,20 @@ struct ReplayArgs {
     /// more line per burst.
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u16).range(1..=64))]
     burst: u16,
-    /// Re-weight each burst's fused hypotheses with a game-context prior (a burst of one frame per frame
-    /// when --burst is 1); the burst metrics then show what the prior buys.
-    #[arg(long, value_enum)]
-    prior: Option<PriorArg>,
+    /// Re-weight each burst's hypotheses (each frame's when --burst is 1) with a game-context prior;
+    /// repeat to combine. `penalty-return`, `own-half`, `belief:X,Y,THETA_DEG[,SIGMA_M[,SIGMA_DEG]]`,
+    /// or drawn around the recording's true pose: `belief-near:ERR_M,ERR_DEG` (a right belief),
+    /// `belief-flipped:ERR_M,ERR_DEG` (its point reflection), `ball:NOISE_M[,TEAMMATES]` and
+    /// `ball-flipped:NOISE_M[,TEAMMATES]` (own ball 0.5–4 m ahead, team ball within NOISE_M). The
+    /// metrics gain a `twins` block: how often the heaviest hypothesis is the right twin.
+    #[arg(long, value_name = "SPEC")]
+    prior: Vec<PriorSpec>,
+    /// Seed for the priors drawn around the true pose.
+    #[arg(long, default_value_t = 0)]
+    prior_seed: u64,
+    /// The priors' floor: no hypothesis ends below min(its weight before the priors, this).
+    #[arg(long, default_value_t = relocd::pipeline::priors::DEFAULT_MIN_SHARE)]
+    min_share: f64,
     /// Verify and refine each burst's hypotheses (each frame's when --burst is 1) against the field
     /// lines in its frames; needs the recording's camera poses. The metrics gain a `refined` block.
     #[arg(long)]
@@ -282,12 +293,6 @@ enum PosesArg {
     /// Uniform over the carpet, any heading.
     Uniform,
     /// Beside either touchline in the own half, facing the field (the penalty-return placement).
-    PenaltyReturn,
-}
-
-#[derive(Clone, Copy, Debug, ValueEnum)]
-enum PriorArg {
-    /// The robot was put back after a penalty: own half, beside a touchline, facing the field.
     PenaltyReturn,
 }
 
@@ -559,6 +564,11 @@ fn replay(args: ReplayArgs) -> anyhow::Result<()> {
         frames = recording.records().len(),
         "replaying"
     );
+    anyhow::ensure!(
+        (0.0..=0.5).contains(&args.min_share),
+        "--min-share {} is not in [0, 0.5]: it is the weight share a prior cannot push a hypothesis below",
+        args.min_share
+    );
     let field = FieldModel::new(contract.field.clone());
     let pipeline = Pipeline::new(model);
     let pipeline = if args.refine { pipeline.with_lines(&field) } else { pipeline };
@@ -568,7 +578,9 @@ fn replay(args: ReplayArgs) -> anyhow::Result<()> {
         &pipeline,
         &ReplayOptions {
             burst: args.burst.into(),
-            prior: args.prior.map(|PriorArg::PenaltyReturn| PlacementPrior::penalty_return()),
+            priors: args.prior.clone(),
+            prior_seed: args.prior_seed,
+            min_share: args.min_share,
         },
         &mut stdout.lock(),
     )

@@ -56,6 +56,7 @@ pub enum PostureEvent {
 pub struct PostureDetector {
     config: PostureConfig,
     pending: Option<PostureEvent>,
+    onset: Option<f64>,
     unloaded_since: Option<f64>,
     settled_since: Option<f64>,
 }
@@ -63,7 +64,14 @@ pub struct PostureDetector {
 impl PostureDetector {
     /// A detector with these thresholds.
     pub fn new(config: PostureConfig) -> Self {
-        Self { config, pending: None, unloaded_since: None, settled_since: None }
+        Self { config, pending: None, onset: None, unloaded_since: None, settled_since: None }
+    }
+
+    /// When the last reported (or the pending) event began, in the samples' time: the first sample
+    /// beyond the fallen tilt, or the first with both feet unloaded. What the robot believed before
+    /// then still holds after a fall or a short carry.
+    pub fn onset(&self) -> Option<f64> {
+        self.onset
     }
 
     /// Whether the last sample showed the robot upright, steady and on both feet.
@@ -81,12 +89,16 @@ impl PostureDetector {
         let right: f64 = state.fsr[4..].iter().map(|&kg| f64::from(kg)).sum();
 
         if tilt > config.fallen_tilt {
+            if self.pending.is_none() {
+                self.onset = Some(self.unloaded_since.unwrap_or(t).min(t));
+            }
             self.pending = Some(PostureEvent::Fall);
         }
         if left < config.unloaded_kg && right < config.unloaded_kg {
             let since = *self.unloaded_since.get_or_insert(t);
             if t - since >= config.unloaded_for && self.pending.is_none() {
                 self.pending = Some(PostureEvent::PickUp);
+                self.onset = Some(since);
             }
         } else {
             self.unloaded_since = None;
@@ -144,6 +156,11 @@ mod tests {
         assert!(feed(&mut detector, &mut t, 3.0, &lying()).is_empty());
         assert!(feed(&mut detector, &mut t, 0.9, &STANDING).is_empty(), "not settled for a second yet");
         assert_eq!(feed(&mut detector, &mut t, 0.3, &STANDING), vec![PostureEvent::Fall]);
+        assert!(
+            (detector.onset().unwrap() - 2.0).abs() < 0.02,
+            "the fall began at 2 s: {:?}",
+            detector.onset()
+        );
         assert!(feed(&mut detector, &mut t, 5.0, &STANDING).is_empty(), "reported once");
     }
 
@@ -154,6 +171,7 @@ mod tests {
         feed(&mut detector, &mut t, 1.0, &STANDING);
         assert!(feed(&mut detector, &mut t, 4.0, &carried()).is_empty());
         assert_eq!(feed(&mut detector, &mut t, 1.5, &STANDING), vec![PostureEvent::PickUp]);
+        assert!((detector.onset().unwrap() - 1.0).abs() < 0.02, "lifted at 1 s: {:?}", detector.onset());
     }
 
     #[test]

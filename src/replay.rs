@@ -6,9 +6,15 @@ use std::io::Write;
 use serde::Serialize;
 use tracing::warn;
 
-use crate::eval::{BurstEvaluation, Evaluation, Metrics, RefinedEvaluation, Sample};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+
+use crate::eval::{
+    BurstEvaluation, Evaluation, Metrics, RefinedEvaluation, Sample, TwinEvaluation, TwinMetrics,
+};
 use crate::geometry::{FieldPose, PoseSigma};
-use crate::pipeline::{BurstError, Estimate, Pipeline, PlacementPrior};
+use crate::pipeline::priors::simulate::{PriorSpec, priors_for};
+use crate::pipeline::{BurstError, Estimate, Pipeline};
 use crate::protocol::message::LineEvidence;
 use crate::recording::{FrameRecord, Recording};
 use crate::relocaliser::{Relocalisation, Timings};
@@ -66,6 +72,9 @@ pub struct BurstReport {
     /// Frames that agree with the fused pose.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub agreeing: Option<usize>,
+    /// The priors that re-weighted the hypotheses, as the message's `prior` names them.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub prior: Option<String>,
     /// The true pose of the burst's first frame, if recorded.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub truth: Option<WirePose>,
@@ -76,6 +85,7 @@ pub struct BurstReport {
 
 impl BurstReport {
     fn new(records: &[FrameRecord], estimate: Result<&Estimate, &BurstError>) -> Self {
+        let prior = estimate.ok().and_then(|estimate| estimate.priors.names());
         let (hypotheses, agreeing, error) = match estimate {
             Ok(estimate) => (
                 Some(
@@ -99,6 +109,7 @@ impl BurstReport {
             burst: records.iter().map(|record| record.file.clone()).collect(),
             hypotheses,
             agreeing,
+            prior,
             truth: records[0].pose.as_ref().map(WirePose::from),
             error,
         }
@@ -191,12 +202,17 @@ pub struct ReplaySummary {
 }
 
 /// How a replay treats consecutive frames.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug)]
 pub struct ReplayOptions {
     /// Frames per standing robot; above 1, every `burst` consecutive frames are fused.
     pub burst: usize,
-    /// A game-context prior applied to every fused burst (bursts of one frame when `burst` is 1).
-    pub prior: Option<PlacementPrior>,
+    /// Priors applied to every fused burst (bursts of one frame when `burst` is 1), drawn around the
+    /// burst's true pose where the spec says so.
+    pub priors: Vec<PriorSpec>,
+    /// Seed of the draws.
+    pub prior_seed: u64,
+    /// The priors' floor (see [`crate::pipeline::Priors::min_share`]).
+    pub min_share: f64,
 }
 
 /// Relocalises every frame of `recording` with `pipeline`, writing one JSON line per frame to `out`;
@@ -214,6 +230,9 @@ pub fn replay(
     let mut evaluations = Vec::new();
     let mut burst_evaluations = Vec::new();
     let mut refined_evaluations = Vec::new();
+    let mut twin_evaluations = Vec::new();
+    let mut rng = ChaCha8Rng::seed_from_u64(options.prior_seed);
+    let with_priors = !options.priors.is_empty();
     let mut failed = 0;
     for group in recording.records().chunks(burst_size) {
         let mut burst = pipeline.burst();
@@ -243,14 +262,22 @@ pub fn replay(
             };
             write_line(out, &report)?;
         }
-        if burst_size > 1 || options.prior.is_some() || pipeline.checks_lines() {
-            let (estimate, _) = burst.finish(options.prior.as_ref());
+        if burst_size > 1 || with_priors || pipeline.checks_lines() {
+            let priors = priors_for(&options.priors, group[0].pose.as_ref(), options.min_share, &mut rng);
+            let (estimate, _) = burst.finish(&priors);
             if let (Ok(estimate), Some(truth)) = (&estimate, group[0].pose) {
-                if burst_size > 1 || options.prior.is_some() {
+                if burst_size > 1 || with_priors {
                     burst_evaluations.push(BurstEvaluation::new(&truth, &estimate.network));
                 }
                 if pipeline.checks_lines() {
                     refined_evaluations.push(RefinedEvaluation::new(&truth, &estimate.hypotheses));
+                }
+                if with_priors {
+                    twin_evaluations.push(TwinEvaluation::new(
+                        &truth,
+                        &estimate.hypotheses,
+                        &estimate.priors.before,
+                    ));
                 }
             }
             write_line(out, &BurstReport::new(group, estimate.as_ref()))?;
@@ -259,7 +286,12 @@ pub fn replay(
     Ok(ReplaySummary {
         frames: recording.records().len(),
         failed,
-        metrics: Metrics::summarise(&evaluations, &burst_evaluations, &refined_evaluations),
+        metrics: Metrics::summarise(&evaluations, &burst_evaluations, &refined_evaluations).map(
+            |mut metrics| {
+                metrics.twins = TwinMetrics::summarise(&twin_evaluations);
+                metrics
+            },
+        ),
         evaluations,
     })
 }

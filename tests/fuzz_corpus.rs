@@ -83,6 +83,14 @@ fn write_seed_corpus() {
 
     write("control", "relocalise", br#"{"relocalise": {"reason": "lost", "head_yaw": 0.3}}"#);
     write("control", "status", br#"{"status": {}}"#);
+    write("control", "relocalise-context", br#"{"relocalise": {"reason": "fell", "prior": {"pose": {"x": -2.0, "y": 1.0, "theta": 0.5, "sigma": {"x": 0.3, "y": 0.3, "theta": 0.2}, "age_s": 0.4}}, "own_half": true, "ball": {"own": {"distance": 1.8, "bearing": 0.2}, "team": {"x": -0.5, "y": 0.8, "sigma": 0.3, "teammates": 3}}}}"#);
+    write("control", "relocalise-bad-context", br#"{"relocalise": {"prior": {"pose": {"x": -9.0, "y": 1.0, "theta": 0.5, "sigma": {"x": -0.3, "y": 0.3, "theta": 0.2}, "z": 1}}, "own_half": "yes", "ball": {"own": {"distance": 99, "bearing": 9}, "team": {"x": 0, "y": 0, "sigma": 0, "teammates": 0}}}}"#);
+    write("control", "belief", br#"{"belief": {"x": -2.0, "y": 1.0, "theta": 0.5, "sigma": {"x": 0.3, "y": 0.3, "theta": 0.2}, "age_s": 0.1}}"#);
+    write(
+        "control",
+        "belief-bad-sigma",
+        br#"{"belief": {"x": 0, "y": 0, "theta": 0, "sigma": {"x": 0, "y": 0.3, "theta": 0.2}}}"#,
+    );
 
     let header = FrameHeader { width: 4, height: 2, timestamp: 12.5, camera: None };
     write("frame", "tiny", &[&header.to_bytes()[..], &[128u8; 16][..]].concat());

@@ -85,6 +85,8 @@ pub struct Config {
     pub max_datagram_bytes: usize,
     /// Verify and refine the hypotheses against the field lines in the burst's frames.
     pub refine: bool,
+    /// The game and team context that tells the symmetric twins apart.
+    pub priors: PriorsConfig,
 }
 
 impl Default for Config {
@@ -109,6 +111,7 @@ impl Default for Config {
             process: ProcessConfig::default(),
             max_datagram_bytes: 16_384,
             refine: true,
+            priors: PriorsConfig::default(),
         }
     }
 }
@@ -212,6 +215,22 @@ impl Config {
         if self.process.cpu.is_some_and(|cpu| cpu >= libc::CPU_SETSIZE as usize) {
             return invalid("process.cpu", "no such CPU");
         }
+        let priors = &self.priors;
+        if !(0.0..=0.5).contains(&priors.min_weight_share) {
+            return invalid("priors.min_weight_share", "must lie in [0, 0.5]");
+        }
+        if !(priors.belief_max_age_s > 0.0 && priors.belief_max_age_s <= 60.0) {
+            return invalid("priors.belief_max_age_s", "must lie in (0, 60] seconds");
+        }
+        if priors.goalkeeper > 20 {
+            return invalid("priors.goalkeeper", "a player number 1 to 20, or 0 for none");
+        }
+        if !(0.0..=1.0).contains(&priors.ball_flip_probability) {
+            return invalid("priors.ball_flip_probability", "a probability in [0, 1]");
+        }
+        if !(0.0..=60.0).contains(&self.gamecontroller.min_penalty_s) {
+            return invalid("gamecontroller.min_penalty_s", "must lie in [0, 60] seconds");
+        }
         if tracing_subscriber::EnvFilter::try_new(&self.log_level).is_err() {
             return invalid("log_level", "expected error, warn, info, debug, trace or a tracing filter");
         }
@@ -230,11 +249,43 @@ pub struct GameControllerConfig {
     pub address: IpAddr,
     /// UDP port (the GameController's is 3838).
     pub port: u16,
+    /// A penalty that ends sooner than this, seconds, was a mistake the referee revoked: the robot was
+    /// not moved, so its end triggers nothing.
+    pub min_penalty_s: f64,
 }
 
 impl Default for GameControllerConfig {
     fn default() -> Self {
-        Self { enabled: true, address: IpAddr::V4(Ipv4Addr::UNSPECIFIED), port: 3838 }
+        Self { enabled: true, address: IpAddr::V4(Ipv4Addr::UNSPECIFIED), port: 3838, min_penalty_s: 2.0 }
+    }
+}
+
+/// The game and team context that tells the symmetric twins apart (see `crate::pipeline::priors`).
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct PriorsConfig {
+    /// After the priors, no hypothesis has less than min(its weight before them, this): a wrong prior
+    /// cannot make the right twin vanish.
+    pub min_weight_share: f64,
+    /// The belief stream's last pose before a fall or pick-up (or a request's prior) older than this,
+    /// seconds, is ignored.
+    pub belief_max_age_s: f64,
+    /// The goalkeeper's player number (0: none): as that player, every burst assumes the own half
+    /// unless a request says `"own_half": false`.
+    pub goalkeeper: u8,
+    /// Chance that one teammate's ball is point-reflected (it is itself flipped); the team ball counts
+    /// as flipped with this to the power of the teammates agreeing on it.
+    pub ball_flip_probability: f64,
+}
+
+impl Default for PriorsConfig {
+    fn default() -> Self {
+        Self {
+            min_weight_share: crate::pipeline::priors::DEFAULT_MIN_SHARE,
+            belief_max_age_s: 5.0,
+            goalkeeper: 1,
+            ball_flip_probability: crate::pipeline::priors::simulate::DEFAULT_BALL_FLIP_PROBABILITY,
+        }
     }
 }
 

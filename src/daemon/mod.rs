@@ -3,6 +3,7 @@
 //! thread owns the frame source and the network and does all blocking work.
 
 pub mod config;
+pub mod context;
 pub mod publish;
 pub mod queue;
 pub mod record;
@@ -62,7 +63,7 @@ pub fn run(config: Config) -> anyhow::Result<()> {
     let runtime = tokio::runtime::Builder::new_current_thread().enable_all().build()?;
     let stop = Arc::new(AtomicBool::new(false));
     let queue = Arc::new(TriggerQueue::new(TRIGGER_QUEUE));
-    let triggers = Triggers::new(queue.clone(), status.clone());
+    let triggers = Triggers::new(queue.clone(), status.clone(), config.priors.belief_max_age_s);
     let sensed = Arc::new(Sensed::default());
 
     // Sockets are bound inside the runtime and owned by their tasks, which remove Unix socket files
@@ -92,6 +93,8 @@ pub fn run(config: Config) -> anyhow::Result<()> {
         status: status.clone(),
         stop: stop.clone(),
         replacement: replacement.clone(),
+        priors: config.priors.clone(),
+        goalkeeper: config.player.is_some_and(|player| player == config.priors.goalkeeper),
     };
     // The sender drops when the thread ends, however it ends: a thread that died is noticed at once.
     let (alive, mut exited) = tokio::sync::oneshot::channel::<()>();
@@ -234,7 +237,7 @@ fn start_inputs(
             let socket = sockets::bind_udp(address, true)
                 .with_context(|| format!("cannot listen for the GameController on {address}"))?;
             info!("GameController: team {team}, player {player}, on {address} ({})", reach(address.ip()));
-            let watch = PenaltyWatch::new(team, player);
+            let watch = PenaltyWatch::new(team, player, gamecontroller.min_penalty_s);
             tokio::spawn(triggers::gamecontroller(
                 Datagram::Udp(socket),
                 config.max_datagram_bytes,

@@ -8,6 +8,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Condvar, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
+use super::context::TriggerContext;
 use crate::protocol::message::TriggerKind;
 
 /// How often a waiting relocalisation thread looks at the stop flag.
@@ -24,6 +25,8 @@ pub struct TriggerEvent {
     pub reason: Option<String>,
     /// The head yaw the frames will be taken with, radians, if the trigger knows it.
     pub head_yaw: Option<f64>,
+    /// What it brings to its burst's priors.
+    pub context: TriggerContext,
     /// When it arrived.
     pub at: Instant,
     /// When it arrived, Unix seconds.
@@ -101,7 +104,15 @@ mod tests {
     use crate::protocol::message::TriggerKind;
 
     fn event(id: u64, kind: TriggerKind) -> TriggerEvent {
-        TriggerEvent { id, kind, reason: None, head_yaw: None, at: Instant::now(), t: 0.0 }
+        TriggerEvent {
+            id,
+            kind,
+            reason: None,
+            head_yaw: None,
+            context: TriggerContext::default(),
+            at: Instant::now(),
+            t: 0.0,
+        }
     }
 
     #[test]

@@ -13,14 +13,15 @@ use tokio::io::AsyncReadExt;
 use tokio::net::UnixStream;
 use tracing::{debug, info, warn};
 
+use super::context::{BeliefLog, TriggerContext};
 use super::queue::{Queued, TriggerEvent, TriggerQueue};
 use super::sockets::{Datagram, MAX_DATAGRAM, Peer};
 use super::source::unix_now;
 use super::status::{GameInfo, Status};
 use crate::geometry::BodyAngles;
 use crate::posture::{PostureDetector, PostureEvent};
-use crate::protocol::control::ControlRequest;
-use crate::protocol::gamecontroller::{GameControlData, PacketOrder, PenaltyWatch};
+use crate::protocol::control::{ControlError, ControlRequest};
+use crate::protocol::gamecontroller::{GameControlData, PacketOrder, PenaltyEnd, PenaltyWatch};
 use crate::protocol::lola::{LolaState, next_msgpack_value};
 use crate::protocol::message::TriggerKind;
 
@@ -35,20 +36,35 @@ pub struct Triggers {
     queue: Arc<TriggerQueue>,
     next_id: Arc<AtomicU64>,
     status: Arc<Status>,
+    beliefs: Arc<BeliefLog>,
+    belief_max_age_s: f64,
 }
 
 impl Triggers {
-    /// A handle on `queue`.
-    pub fn new(queue: Arc<TriggerQueue>, status: Arc<Status>) -> Self {
-        Self { queue, next_id: Arc::new(AtomicU64::new(1)), status }
+    /// A handle on `queue`; beliefs from before a fall or pick-up older than `belief_max_age_s` are
+    /// not used.
+    pub fn new(queue: Arc<TriggerQueue>, status: Arc<Status>, belief_max_age_s: f64) -> Self {
+        Self {
+            queue,
+            next_id: Arc::new(AtomicU64::new(1)),
+            status,
+            beliefs: Arc::new(BeliefLog::default()),
+            belief_max_age_s,
+        }
     }
 
     /// Queues a trigger; returns its id and the id of the trigger whose message will answer it (its
-    /// own, or a waiting one of its kind when the queue is full).
-    pub fn fire(&self, kind: TriggerKind, reason: Option<String>, head_yaw: Option<f64>) -> (u64, u64) {
+    /// own, or a waiting one of its kind when the queue is full, whose context then counts).
+    pub fn fire(
+        &self,
+        kind: TriggerKind,
+        reason: Option<String>,
+        head_yaw: Option<f64>,
+        context: TriggerContext,
+    ) -> (u64, u64) {
         let id = self.next_id.fetch_add(1, Ordering::Relaxed);
         self.status.count_trigger(kind);
-        let event = TriggerEvent { id, kind, reason, head_yaw, at: Instant::now(), t: unix_now() };
+        let event = TriggerEvent { id, kind, reason, head_yaw, context, at: Instant::now(), t: unix_now() };
         let reason = event.reason.as_deref().map(|r| format!(" ({r})")).unwrap_or_default();
         match self.queue.push(event) {
             Queued::Waiting => {
@@ -185,15 +201,23 @@ pub async fn gamecontroller(
             rejects.log("GameController packet", &ignored);
             continue;
         }
-        let returned = watch.update(&packet);
+        let ended = watch.update(&packet, started.elapsed().as_secs_f64());
         if let Some(penalty) = watch.penalty() {
             status.set_game(GameInfo { state: packet.state, set_play: packet.set_play, penalty, age_s: 0.0 });
         }
         debug!("GameController: {:?}, our team's score {}", packet.state, ours.score);
-        if let Some(returned) = returned {
-            let reason =
-                serde_json::to_value(returned.penalty).ok().and_then(|v| v.as_str().map(String::from));
-            triggers.fire(TriggerKind::PenaltyReturn, reason, None);
+        match ended {
+            Some(PenaltyEnd::Returned(returned)) => {
+                let reason =
+                    serde_json::to_value(returned.penalty).ok().and_then(|v| v.as_str().map(String::from));
+                triggers.fire(TriggerKind::PenaltyReturn, reason, None, TriggerContext::default());
+            }
+            Some(PenaltyEnd::Revoked { penalty, seconds }) => {
+                info!(
+                    "penalty {penalty:?} ended after {seconds:.1} s, under gamecontroller.min_penalty_s: revoked, nothing to do"
+                );
+            }
+            None => {}
         }
     }
 }
@@ -213,7 +237,21 @@ fn take_sample(
             PostureEvent::Fall => TriggerKind::Fall,
             PostureEvent::PickUp => TriggerKind::PickUp,
         };
-        triggers.fire(kind, None, None);
+        // The team's belief from before the robot fell or was lifted, unless a referee carried it
+        // off the field (then the penalty return's placement prior speaks).
+        let onset = detector.onset().map(|onset| started + Duration::from_secs_f64(onset.max(0.0)));
+        let penalised = triggers.status.snapshot().game.is_some_and(|game| game.penalty.moves_robot());
+        let belief = onset
+            .filter(|_| !penalised)
+            .and_then(|onset| triggers.beliefs.before(onset, triggers.belief_max_age_s));
+        match &belief {
+            Some(belief) => info!(
+                "{kind:?}: the belief ({:.2}, {:.2}) from {:.1} s before is the prior",
+                belief.pose.x, belief.pose.y, belief.age_s
+            ),
+            None => debug!("{kind:?}: no belief from before it (none, too old, or penalised)"),
+        }
+        triggers.fire(kind, None, None, TriggerContext { belief, ..TriggerContext::default() });
     }
 }
 
@@ -299,19 +337,38 @@ pub async fn control(socket: Datagram, limit: usize, triggers: Triggers, status:
     loop {
         let (received, peer) = receive(&socket, &mut buffer, "control").await;
         let request = match received {
-            Ok(length) => ControlRequest::parse(&buffer[..length]).map_err(|error| error.to_string()),
+            Ok(length) => match ControlRequest::parse(&buffer[..length]) {
+                Err(error @ ControlError::Invalid { field: "belief", .. }) => {
+                    // The belief stream is never answered, so that a sender need not read: a refused
+                    // belief is counted and logged only.
+                    status.update(|report| report.rejected.control += 1);
+                    rejects.log("belief", &error);
+                    continue;
+                }
+                parsed => parsed.map_err(|error| error.to_string()),
+            },
             Err(oversized) => Err(oversized.to_string()),
         };
         let answer = match request {
             Ok(ControlRequest::Relocalise(request)) => {
-                match triggers.fire(TriggerKind::Request, request.reason, request.head_yaw) {
-                    (id, answered_by) if answered_by == id => {
-                        serde_json::json!({ "accepted": { "trigger": id } })
-                    }
-                    (id, answered_by) => {
-                        serde_json::json!({ "accepted": { "trigger": id, "coalesced_into": answered_by } })
-                    }
+                let (context, errors) = TriggerContext::of_request(&request, triggers.belief_max_age_s);
+                for error in &errors {
+                    rejects.log("relocalise request context", error);
                 }
+                let (id, answered_by) =
+                    triggers.fire(TriggerKind::Request, request.reason, request.head_yaw, context);
+                let mut accepted = serde_json::json!({ "trigger": id });
+                if answered_by != id {
+                    accepted["coalesced_into"] = answered_by.into();
+                }
+                if !errors.is_empty() {
+                    accepted["context_errors"] = errors.into();
+                }
+                serde_json::json!({ "accepted": accepted })
+            }
+            Ok(ControlRequest::Belief(pose)) => {
+                triggers.beliefs.record(pose);
+                continue;
             }
             Ok(ControlRequest::Status(_)) => serde_json::json!({ "status": status.snapshot() }),
             Err(error) => {
@@ -334,10 +391,11 @@ mod tests {
     fn a_trigger_beyond_the_queue_is_answered_by_a_waiting_one_and_counted() {
         let status = Arc::new(Status::new("sim".into(), "model".into()));
         let queue = Arc::new(TriggerQueue::new(1));
-        let triggers = Triggers::new(queue.clone(), status.clone());
-        assert_eq!(triggers.fire(TriggerKind::Request, None, None), (1, 1));
-        assert_eq!(triggers.fire(TriggerKind::Request, None, None), (2, 1));
-        assert_eq!(triggers.fire(TriggerKind::Fall, None, None), (3, 3));
+        let triggers = Triggers::new(queue.clone(), status.clone(), 5.0);
+        let fire = |kind| triggers.fire(kind, None, None, TriggerContext::default());
+        assert_eq!(fire(TriggerKind::Request), (1, 1));
+        assert_eq!(fire(TriggerKind::Request), (2, 1));
+        assert_eq!(fire(TriggerKind::Fall), (3, 3));
         let report = status.snapshot();
         assert_eq!((report.triggers.request, report.triggers.fall, report.coalesced), (2, 1, 1));
         assert_eq!(queue.drain().iter().map(|event| event.id).collect::<Vec<_>>(), [1, 3]);

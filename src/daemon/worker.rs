@@ -9,17 +9,16 @@ use std::time::{Duration, Instant};
 
 use tracing::{info, warn};
 
-use super::config::BurstConfig;
+use super::config::{BurstConfig, PriorsConfig};
+use super::context::priors_for_batch;
 use super::publish::Publisher;
 use super::queue::{TriggerEvent, TriggerQueue};
 use super::source::{CaptureRequest, FrameSource, capture, sleep_unless_stopped, unix_now};
 use super::status::Status;
 use super::triggers::Sensed;
 use crate::geometry::{CameraMounting, FieldPose};
-use crate::pipeline::{Pipeline, PlacementPrior, StageTimes};
-use crate::protocol::message::{
-    FrameCounts, Latency, Message, ModelInfo, SCHEMA_VERSION, Trigger, TriggerKind,
-};
+use crate::pipeline::{Pipeline, Priors, StageTimes};
+use crate::protocol::message::{FrameCounts, Latency, Message, ModelInfo, SCHEMA_VERSION, Trigger};
 use crate::relocaliser::Model;
 
 /// How often the settle wait looks at the sensors.
@@ -46,6 +45,10 @@ pub struct Worker {
     pub stop: Arc<AtomicBool>,
     /// A model loaded on SIGHUP, taken before the next burst.
     pub replacement: Arc<ModelSlot>,
+    /// How the triggers' context becomes priors.
+    pub priors: PriorsConfig,
+    /// We are the goalkeeper: own half unless a request says otherwise.
+    pub goalkeeper: bool,
 }
 
 /// Hands a newly loaded model to the relocalisation thread, which switches to it between bursts.
@@ -129,7 +132,7 @@ impl Worker {
     fn relocalise(&mut self, seq: u64, batch: &[TriggerEvent]) -> Message {
         let contract = self.pipeline.relocaliser().model().contract();
         let head_yaw = batch.iter().rev().find_map(|trigger| trigger.head_yaw);
-        let penalty_return = batch.iter().any(|trigger| trigger.kind == TriggerKind::PenaltyReturn);
+        let priors = priors_for_batch(batch, &self.priors, self.goalkeeper);
         let mut message = Message {
             schema: SCHEMA_VERSION,
             seq,
@@ -147,6 +150,7 @@ impl Worker {
             model: ModelInfo { id: contract.model_id.clone(), representation: contract.representation },
             frames: FrameCounts { requested: self.burst.frames as u32, used: 0, agreeing: 0 },
             prior: None,
+            priors: Vec::new(),
             latency_ms: Latency::default(),
             hypotheses: Vec::new(),
             failure: None,
@@ -154,7 +158,7 @@ impl Worker {
         let first_at = batch[0].at;
         let mut times =
             BurstTimes { capture_started: Instant::now(), capture_ms: 0.0, stages: StageTimes::default() };
-        match self.estimate(head_yaw, penalty_return, &mut times, &mut message) {
+        match self.estimate(head_yaw, &priors, &mut times, &mut message) {
             Ok(()) => {}
             Err(failure) => {
                 warn!("relocalisation {seq} failed: {failure}");
@@ -180,7 +184,7 @@ impl Worker {
     fn estimate(
         &mut self,
         head_yaw: Option<f64>,
-        penalty_return: bool,
+        priors: &Priors,
         times: &mut BurstTimes,
         message: &mut Message,
     ) -> Result<(), String> {
@@ -216,13 +220,11 @@ impl Worker {
         if let Some(error) = burst.failures().first() {
             warn!("{} of {frames} frames could not be relocalised: {error}", burst.failures().len());
         }
-        let prior = penalty_return.then(PlacementPrior::penalty_return);
-        let (estimate, stages) = burst.finish(prior.as_ref());
+        let (estimate, stages) = burst.finish(priors);
         times.stages = stages;
         let estimate = estimate.map_err(|error| error.to_string())?;
-        if prior.is_some() {
-            message.prior = Some("penalty_return".into());
-        }
+        message.prior = estimate.priors.names();
+        message.priors = estimate.priors.applied.iter().map(Into::into).collect();
         message.frames.used = estimate.frames as u32;
         message.frames.agreeing = estimate.agreeing as u32;
         message.hypotheses = estimate.hypotheses.iter().map(Into::into).collect();

@@ -313,6 +313,9 @@ pub struct Metrics {
     /// After line refinement, when the replay refined.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub refined: Option<RefinedMetrics>,
+    /// Which twin the bursts' heaviest hypotheses chose, when the replay applied priors.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub twins: Option<super::TwinMetrics>,
 }
 
 /// Distance bands from the fold boundary, metres.
@@ -359,6 +362,7 @@ impl Metrics {
             coverage,
             bursts: BurstMetrics::summarise(bursts),
             refined: RefinedMetrics::summarise(refined),
+            twins: None,
         })
     }
 
@@ -401,6 +405,9 @@ impl Metrics {
                 100.0 * refined.unrefined_share,
                 100.0 * refined.contradicted_share
             );
+        }
+        if let Some(twins) = &self.twins {
+            counts += &format!("\n{}", twins.line());
         }
         text + &counts
     }

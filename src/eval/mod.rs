@@ -3,10 +3,11 @@
 //! fold-bit error, errors by distance to the fold boundary, and accuracy against coverage.
 
 mod metrics;
+mod twins;
 
-#[cfg(feature = "report")]
 pub(crate) use metrics::median;
 pub use metrics::{
     BurstEvaluation, BurstMetrics, Coverage, ErrorStats, Evaluation, Metrics, RefinedEvaluation,
     RefinedMetrics, Sample,
 };
+pub use twins::{TwinEvaluation, TwinMetrics};

@@ -6,14 +6,14 @@
 //! the game-context priors re-weight the result. The daemon, `relocd replay` and `relocd bench` all run
 //! this one path; none of them assembles the stages itself.
 
-pub mod prior;
+pub mod priors;
 mod wire;
 
 use std::time::Instant;
 
 use thiserror::Error;
 
-pub use prior::PlacementPrior;
+pub use priors::{PlacementPrior, PriorReport, Priors};
 
 use crate::frame::Frame;
 use crate::geometry::{CameraIntrinsics, CameraPose, FieldModel, FieldPose, PoseSigma};
@@ -48,6 +48,8 @@ pub struct Estimate {
     pub frames: usize,
     /// Frames within a metre (heading counted as a metre per radian) of the fused pose.
     pub agreeing: usize,
+    /// What the burst's priors did to `hypotheses`.
+    pub priors: PriorReport,
 }
 
 /// Why a burst gave no estimate.
@@ -173,9 +175,9 @@ impl Burst<'_> {
         &self.failures
     }
 
-    /// Fuses the frames, verifies the result against the lines and applies `prior`; returns the
-    /// estimate and where the burst's time went.
-    pub fn finish(mut self, prior: Option<&PlacementPrior>) -> (Result<Estimate, BurstError>, StageTimes) {
+    /// Fuses the frames, verifies the result against the lines and re-weights it with the burst's
+    /// `priors`; returns the estimate and where the burst's time went.
+    pub fn finish(mut self, priors: &Priors) -> (Result<Estimate, BurstError>, StageTimes) {
         let fusing = Instant::now();
         let fused = fuse(&self.predictions).map_err(|error| match self.failures.first() {
             Some(failure) => BurstError::NoFrameRelocalised(failure.clone()),
@@ -191,10 +193,10 @@ impl Burst<'_> {
             verify(refiner, &self.percepts, &mut estimate.hypotheses);
             self.times.lines_ms += verifying.elapsed().as_secs_f64() * 1e3;
         }
-        if let Some(prior) = prior {
+        if !priors.is_empty() {
             let weighing = Instant::now();
-            prior.apply(&mut estimate.hypotheses);
-            prior.apply(&mut estimate.network);
+            estimate.priors = priors.apply(&mut estimate.hypotheses);
+            priors.apply(&mut estimate.network);
             self.times.fusion_ms += weighing.elapsed().as_secs_f64() * 1e3;
         }
         (Ok(estimate), self.times)
@@ -210,7 +212,13 @@ pub fn fuse(predictions: &[Prediction]) -> Result<Estimate, FusionError> {
         .iter()
         .map(|h| Hypothesis { pose: h.pose, weight: h.weight, sigma: h.sigma, lines: None })
         .collect();
-    Ok(Estimate { network: hypotheses.clone(), hypotheses, frames: fused.frames, agreeing: fused.agreeing })
+    Ok(Estimate {
+        network: hypotheses.clone(),
+        hypotheses,
+        frames: fused.frames,
+        agreeing: fused.agreeing,
+        priors: PriorReport::default(),
+    })
 }
 
 /// Verifies and refines `hypotheses` against the line points of a burst's frames: each takes the fitted

@@ -1,6 +1,7 @@
 //! The wire types of [`crate::protocol::message`], built from pipeline results.
 
 use super::Hypothesis;
+use super::priors::AppliedPrior;
 use crate::protocol::message;
 use crate::refine::{LineCheck, LineEvidence};
 
@@ -36,5 +37,11 @@ impl From<&Hypothesis> for message::Hypothesis {
             sigma: [hypothesis.sigma.x, hypothesis.sigma.y, hypothesis.sigma.theta],
             lines: hypothesis.lines.map(Into::into),
         }
+    }
+}
+
+impl From<&AppliedPrior> for message::AppliedPrior {
+    fn from(applied: &AppliedPrior) -> Self {
+        Self { name: applied.kind.name().into(), factors: applied.factors.clone() }
     }
 }

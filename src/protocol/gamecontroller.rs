@@ -379,18 +379,36 @@ pub struct Returned {
     pub penalty: Penalty,
 }
 
+/// How our player's penalty ended.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum PenaltyEnd {
+    /// The robot was put back: relocalise.
+    Returned(Returned),
+    /// The penalty ended sooner than the minimum: a mistake the referee revoked, the robot was not
+    /// moved.
+    Revoked {
+        /// The penalty.
+        penalty: Penalty,
+        /// How long it lasted, seconds.
+        seconds: f64,
+    },
+}
+
 /// Follows our player's penalty across packets and reports when it returns from a penalty that moved it.
 #[derive(Clone, Debug)]
 pub struct PenaltyWatch {
     team_number: u8,
     player_number: u8,
+    min_penalty_s: f64,
     last: Option<Penalty>,
+    since: Option<f64>,
 }
 
 impl PenaltyWatch {
-    /// Watches player `player_number` (1-based) of team `team_number`.
-    pub fn new(team_number: u8, player_number: u8) -> Self {
-        Self { team_number, player_number, last: None }
+    /// Watches player `player_number` (1-based) of team `team_number`; a penalty that ends within
+    /// `min_penalty_s` seconds counts as revoked.
+    pub fn new(team_number: u8, player_number: u8, min_penalty_s: f64) -> Self {
+        Self { team_number, player_number, min_penalty_s, last: None, since: None }
     }
 
     /// Our player's penalty in the last packet about our team, if any.
@@ -398,14 +416,28 @@ impl PenaltyWatch {
         self.last
     }
 
-    /// Takes one packet; returns `Some` when our player has just come back from a penalty that moved
-    /// it. Packets for other teams change nothing.
-    pub fn update(&mut self, packet: &GameControlData) -> Option<Returned> {
+    /// Takes one packet received at `now_s` seconds (any monotonic clock); returns `Some` when our
+    /// player's penalty that moved it has just ended: returned, or revoked when it lasted less than
+    /// the minimum. A penalty first seen in the watch's first packet counts from then. Packets for
+    /// other teams change nothing.
+    pub fn update(&mut self, packet: &GameControlData, now_s: f64) -> Option<PenaltyEnd> {
         let penalty = packet.team_info(self.team_number)?.player(self.player_number)?.penalty;
         let previous = self.last.replace(penalty);
+        if penalty.moves_robot() {
+            if !previous.is_some_and(Penalty::moves_robot) {
+                self.since = Some(now_s);
+            }
+            return None;
+        }
+        let since = self.since.take();
         match previous {
             Some(previous) if previous.moves_robot() && penalty == Penalty::None => {
-                Some(Returned { penalty: previous })
+                let seconds = now_s - since.unwrap_or(now_s);
+                Some(if seconds < self.min_penalty_s {
+                    PenaltyEnd::Revoked { penalty: previous, seconds }
+                } else {
+                    PenaltyEnd::Returned(Returned { penalty: previous })
+                })
             }
             _ => None,
         }
@@ -561,26 +593,46 @@ mod tests {
 
     #[test]
     fn returning_from_a_penalty_that_moved_the_robot_is_a_kidnap() {
-        let mut watch = PenaltyWatch::new(5, 2);
-        assert_eq!(watch.update(&packet(Penalty::None)), None);
-        assert_eq!(watch.update(&packet(Penalty::PlayerPushing)), None);
-        assert_eq!(watch.update(&packet(Penalty::PlayerPushing)), None);
-        assert_eq!(watch.update(&packet(Penalty::None)), Some(Returned { penalty: Penalty::PlayerPushing }));
-        assert_eq!(watch.update(&packet(Penalty::None)), None, "reported once");
+        let mut watch = PenaltyWatch::new(5, 2, 2.0);
+        assert_eq!(watch.update(&packet(Penalty::None), 0.0), None);
+        assert_eq!(watch.update(&packet(Penalty::PlayerPushing), 0.5), None);
+        assert_eq!(watch.update(&packet(Penalty::PlayerPushing), 1.0), None);
+        assert_eq!(
+            watch.update(&packet(Penalty::None), 45.5),
+            Some(PenaltyEnd::Returned(Returned { penalty: Penalty::PlayerPushing }))
+        );
+        assert_eq!(watch.update(&packet(Penalty::None), 46.0), None, "reported once");
         assert_eq!(watch.penalty(), Some(Penalty::None));
     }
 
     #[test]
+    fn a_penalty_shorter_than_the_minimum_was_revoked() {
+        let mut watch = PenaltyWatch::new(5, 2, 2.0);
+        watch.update(&packet(Penalty::None), 0.0);
+        watch.update(&packet(Penalty::RequestForPickup), 10.0);
+        // Another moving penalty in between does not restart the clock.
+        watch.update(&packet(Penalty::PlayerPushing), 10.5);
+        assert_eq!(
+            watch.update(&packet(Penalty::None), 11.0),
+            Some(PenaltyEnd::Revoked { penalty: Penalty::PlayerPushing, seconds: 1.0 })
+        );
+        watch.update(&packet(Penalty::PlayerPushing), 20.0);
+        assert!(matches!(watch.update(&packet(Penalty::None), 22.0), Some(PenaltyEnd::Returned(_))));
+    }
+
+    #[test]
     fn in_place_penalties_and_other_teams_do_not_trigger() {
-        let mut watch = PenaltyWatch::new(5, 2);
-        watch.update(&packet(Penalty::IllegalMotionInSet));
-        assert_eq!(watch.update(&packet(Penalty::None)), None);
-        let mut other = PenaltyWatch::new(33, 2);
-        other.update(&packet(Penalty::LeavingTheField));
-        assert_eq!(other.update(&packet(Penalty::None)), None);
+        let mut watch = PenaltyWatch::new(5, 2, 2.0);
+        watch.update(&packet(Penalty::IllegalMotionInSet), 0.0);
+        assert_eq!(watch.update(&packet(Penalty::None), 30.0), None);
+        watch.update(&packet(Penalty::IllegalMotionInStandby), 40.0);
+        assert_eq!(watch.update(&packet(Penalty::None), 70.0), None);
+        let mut other = PenaltyWatch::new(33, 2, 2.0);
+        other.update(&packet(Penalty::LeavingTheField), 0.0);
+        assert_eq!(other.update(&packet(Penalty::None), 30.0), None);
         assert_eq!(other.penalty(), None);
-        let mut no_slot = PenaltyWatch::new(5, 21);
-        assert_eq!(no_slot.update(&packet(Penalty::None)), None);
+        let mut no_slot = PenaltyWatch::new(5, 21, 2.0);
+        assert_eq!(no_slot.update(&packet(Penalty::None), 0.0), None);
     }
 
     proptest! {

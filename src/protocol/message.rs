@@ -165,6 +165,17 @@ pub struct Hypothesis {
     pub lines: Option<LineEvidence>,
 }
 
+/// One prior that re-weighted a message's hypotheses.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct AppliedPrior {
+    /// `penalty_return`, `belief`, `own_half`, `ball`, or `floor` (the floor lifted a hypothesis the
+    /// other priors pushed below its minimum share).
+    pub name: String,
+    /// Its factor for each hypothesis, in the order of `hypotheses`: relative likelihoods (the largest
+    /// is 1), or for the floor what it multiplied each weight by.
+    pub factors: Vec<f64>,
+}
+
 /// The message published once per relocalisation (or failure).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Message {
@@ -183,9 +194,14 @@ pub struct Message {
     pub model: ModelInfo,
     /// The burst's frames.
     pub frames: FrameCounts,
-    /// The game-context prior applied, e.g. `penalty_return`.
+    /// The priors that re-weighted the hypotheses, joined by `+`, e.g. `penalty_return` or
+    /// `belief+own_half+floor`; absent when none did.
     #[serde(default)]
     pub prior: Option<String>,
+    /// What each prior did: its factor for each hypothesis, in the order of `hypotheses`. Absent when
+    /// no prior applied.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub priors: Vec<AppliedPrior>,
     /// Where the time went.
     pub latency_ms: Latency,
     /// Full-field robot poses, heaviest first; empty when relocalisation failed.
@@ -239,6 +255,16 @@ impl Message {
                 return invalid(format!("hypothesis {index} is not finite, weighted in [0, 1] with σ ≥ 0"));
             }
         }
+        for prior in &self.priors {
+            if prior.factors.len() != self.hypotheses.len()
+                || prior.factors.iter().any(|f| !(f.is_finite() && *f >= 0.0))
+            {
+                return invalid(format!(
+                    "prior {} needs one finite, non-negative factor per hypothesis",
+                    prior.name
+                ));
+            }
+        }
         if self.hypotheses.is_empty() != self.failure.is_some() {
             return invalid("a message has either hypotheses or a failure reason".into());
         }
@@ -268,6 +294,7 @@ mod tests {
             },
             frames: FrameCounts { requested: 5, used: 5, agreeing: 4 },
             prior: Some("penalty_return".into()),
+            priors: vec![AppliedPrior { name: "penalty_return".into(), factors: vec![1.0, 0.002] }],
             latency_ms: Latency { total: 750.0, ..Latency::default() },
             hypotheses: vec![
                 Hypothesis {
@@ -308,6 +335,11 @@ mod tests {
         assert_eq!(json["hypotheses"][0]["sigma"][2], 0.01);
         assert_eq!(json["hypotheses"][0]["lines"]["check"], "refined");
         assert!(json["hypotheses"][1].get("lines").is_none(), "no key when refinement is off");
+        assert_eq!(json["priors"][0]["factors"][1], 0.002);
+        let mut plain = message.clone();
+        plain.priors.clear();
+        let json: serde_json::Value = serde_json::from_slice(&plain.encode(Encoding::Json)).unwrap();
+        assert!(json.get("priors").is_none(), "schema 1 without priors looks as before");
     }
 
     #[test]
@@ -324,7 +356,11 @@ mod tests {
         failed.failure = Some("camera gone".into());
         assert!(matches!(Message::decode(&failed.encode(Encoding::Json)), Err(MessageError::Invalid(_))));
         failed.hypotheses.clear();
+        failed.priors.clear();
         assert!(Message::decode(&failed.encode(Encoding::Json)).is_ok());
+        let mut short = example();
+        short.priors[0].factors.pop();
+        assert!(matches!(Message::decode(&short.encode(Encoding::Json)), Err(MessageError::Invalid(_))));
         let mut heavy = example();
         heavy.hypotheses[0].weight = 1.5;
         assert!(matches!(Message::decode(&heavy.encode(Encoding::Json)), Err(MessageError::Invalid(_))));

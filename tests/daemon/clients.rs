@@ -157,3 +157,77 @@ fn the_cpp_sender_forwards_a_frame_and_a_trigger() {
         command
     });
 }
+
+#[test]
+fn every_client_sends_context_and_beliefs_and_hears_what_was_left_out() {
+    let daemon = Daemon::start("replay:{sample}", &["--burst", "1"]);
+    let control = Control::connect(&Address::Unix(daemon.socket("control"))).unwrap();
+    let pose = relocd::client::PoseInput {
+        x: -2.0,
+        y: 1.0,
+        theta: 0.5,
+        sigma: relocd::client::SigmaInput { x: 0.3, y: 0.3, theta: 0.2 },
+        age_s: None,
+    };
+    control.belief(&pose).unwrap();
+    let accepted = control
+        .relocalise_with(&relocd::client::RelocaliseRequest {
+            prior: Some(relocd::client::PriorInput { pose }),
+            own_half: Some(true),
+            ..Default::default()
+        })
+        .unwrap();
+    assert!(accepted.context_errors.is_empty(), "{:?}", accepted.context_errors);
+    assert_eq!(daemon.message().prior.as_deref().map(|p| p.starts_with("belief+own_half")), Some(true));
+
+    let script = format!(
+        "import sys; sys.path.insert(0, {examples:?}); from relocd_client import Control\n\
+         c = Control('unix:{control}')\n\
+         pose = {{'x': -2.0, 'y': 1.0, 'theta': 0.5, 'sigma': {{'x': 0.3, 'y': 0.3, 'theta': 0.2}}}}\n\
+         c.belief(pose)\n\
+         a = c.relocalise_with('py', prior={{'pose': pose}}, ball={{'own': {{'distance': 1.0, 'bearing': 0.1}}, 'team': {{'x': 9.0, 'y': 0.0, 'sigma': 0.3}}}})\n\
+         print(a['trigger'], a['context_errors'][0])\n\
+         c.close()",
+        examples = example("").display().to_string(),
+        control = daemon.socket("control").display()
+    );
+    let output = Command::new("python3").args(["-c", &script]).output().expect("python3 runs");
+    let stdout = succeeded(&output);
+    assert!(stdout.contains("relocalise.ball.team: (9, 0) m is off the carpet"), "{stdout}");
+    assert!(daemon.message().prior.is_some_and(|prior| prior.starts_with("belief")));
+
+    let build = tempfile::tempdir().unwrap();
+    let source = build.path().join("context.cpp");
+    std::fs::write(
+        &source,
+        format!(
+            "#include \"relocd_client.hpp\"\n#include <iostream>\nint main() {{\n\
+             relocd::Control control(\"unix:{}\");\n\
+             relocd::PoseInput pose{{-2.0, 1.0, 0.5, {{0.3, 0.3, -0.2}}, std::nullopt}};\n\
+             control.belief(pose);\n\
+             relocd::Context context; context.prior = pose; context.own_half = true;\n\
+             std::vector<std::string> errors;\n\
+             auto trigger = control.relocalise(\"cpp\", context, &errors);\n\
+             if (!trigger || errors.size() != 1) {{ std::cerr << control.error() << '\\n'; return 1; }}\n\
+             std::cout << errors[0] << '\\n';\n}}\n",
+            daemon.socket("control").display()
+        ),
+    )
+    .unwrap();
+    let binary = build.path().join("context");
+    let compiled = Command::new("g++")
+        .args(["-std=c++17", "-Wall", "-Wextra", "-Wpedantic", "-Werror", "-I"])
+        .arg(example(""))
+        .arg(&source)
+        .arg("-o")
+        .arg(&binary)
+        .output()
+        .expect("g++ runs");
+    assert!(compiled.status.success(), "{}", String::from_utf8_lossy(&compiled.stderr));
+    let stdout = succeeded(&Command::new(&binary).output().unwrap());
+    assert!(stdout.starts_with("relocalise.prior.pose.sigma.theta: -0.2 is not a positive"), "{stdout}");
+    assert!(daemon.message().prior.is_some_and(|prior| prior.starts_with("own_half")));
+    // Three beliefs, none answered: the C++ one, with its negative σ, was refused and counted.
+    assert_eq!(daemon.status()["rejected"]["control"], 1);
+    daemon.stop();
+}

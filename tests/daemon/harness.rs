@@ -27,8 +27,14 @@ pub struct Daemon {
 }
 
 impl Daemon {
-    /// Starts `relocd run` with `source` and loopback/Unix sockets in a fresh directory.
+    /// Starts `relocd run` with `source` and loopback/Unix sockets in a fresh directory. Penalties of
+    /// any length count (`gamecontroller.min_penalty_s = 0`), so tests need not wait them out.
     pub fn start(source: &str, extra: &[&str]) -> Self {
+        Self::start_with(source, extra, 0.0)
+    }
+
+    /// [`Daemon::start`], with `gamecontroller.min_penalty_s` set.
+    pub fn start_with(source: &str, extra: &[&str], min_penalty_s: f64) -> Self {
         let dir = tempfile::tempdir().unwrap();
         let published = UdpSocket::bind("127.0.0.1:0").unwrap();
         published.set_read_timeout(Some(Duration::from_secs(30))).unwrap();
@@ -36,7 +42,7 @@ impl Daemon {
         let config = dir.path().join("relocd.toml");
         let settings = "[burst]\nspacing_ms = 40\nmin_interval_ms = 100\nsettle_timeout_ms = 500\n\
                         [gamecontroller]\naddress = \"127.0.0.1\"\n";
-        std::fs::write(&config, settings).unwrap();
+        std::fs::write(&config, format!("{settings}min_penalty_s = {min_penalty_s:?}\n")).unwrap();
         let path = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
         let mut args = vec![
             "run".to_string(),
@@ -91,6 +97,11 @@ impl Daemon {
         self.status();
     }
 
+    /// Sends a control datagram that gets no answer (a belief).
+    pub fn send_control(&self, datagram: &[u8]) {
+        self.client.send_to(datagram, self.socket("control")).unwrap();
+    }
+
     /// Sends a control datagram and returns the answer.
     pub fn control(&self, request: &[u8]) -> serde_json::Value {
         self.client.send_to(request, self.socket("control")).unwrap();
@@ -135,6 +146,15 @@ impl Daemon {
             socket.send_to(&bytes, self.socket("sensors")).unwrap();
             std::thread::sleep(Duration::from_millis(10));
         }
+    }
+
+    /// The next published message within `timeout`, if any.
+    pub fn message_within(&self, timeout: Duration) -> Option<Message> {
+        self.published.set_read_timeout(Some(timeout)).unwrap();
+        let mut buffer = vec![0u8; 65536];
+        let received = self.published.recv(&mut buffer);
+        self.published.set_read_timeout(Some(Duration::from_secs(30))).unwrap();
+        received.ok().map(|length| Message::decode(&buffer[..length]).expect("a valid message"))
     }
 
     /// The next published message.

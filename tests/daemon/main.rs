@@ -6,5 +6,6 @@
 mod clients;
 mod faults;
 mod harness;
+mod priors;
 mod record;
 mod triggers;

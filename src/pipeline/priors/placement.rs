@@ -2,7 +2,6 @@
 //! symmetric hypotheses the camera supports. It never moves or invents a pose; it only tells the
 //! symmetric twins apart, which the image alone cannot do on a symmetric field.
 
-use super::Hypothesis;
 use crate::geometry::FieldPose;
 use crate::geometry::angle::angle_distance;
 
@@ -53,24 +52,18 @@ impl PlacementPrior {
             })
             .fold(self.floor, f64::max)
     }
-
-    /// Multiplies each hypothesis' weight by the prior, renormalises, and sorts heaviest first.
-    pub fn apply(&self, hypotheses: &mut [Hypothesis]) {
-        for hypothesis in hypotheses.iter_mut() {
-            hypothesis.weight *= self.likelihood(&hypothesis.pose);
-        }
-        let total: f64 = hypotheses.iter().map(|h| h.weight).sum();
-        if total > 0.0 {
-            hypotheses.iter_mut().for_each(|h| h.weight /= total);
-        }
-        hypotheses.sort_by(|a, b| b.weight.total_cmp(&a.weight));
-    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::geometry::{PoseSigma, Symmetry};
+    use crate::pipeline::{Hypothesis, Priors};
+
+    /// The placement alone, without the floor (whose own tests are in the parent module).
+    fn placement() -> Priors {
+        Priors { placement: Some(PlacementPrior::penalty_return()), min_share: 0.0, ..Priors::default() }
+    }
 
     fn twins(pose: FieldPose) -> Vec<Hypothesis> {
         let sigma = PoseSigma { x: 0.3, y: 0.3, theta: 0.1 };
@@ -85,7 +78,7 @@ mod tests {
         // The network, 40 cm and 10° off, cannot tell the two halves apart.
         let seen = FieldPose::new(-2.9, -3.2, 80f64.to_radians()).unwrap();
         let mut hypotheses = twins(Symmetry::PointReflection.apply(&seen));
-        PlacementPrior::penalty_return().apply(&mut hypotheses);
+        placement().apply(&mut hypotheses);
         assert!(hypotheses[0].pose.distance_to(&seen) < 1e-9);
         assert!(hypotheses[0].weight > 0.99, "{}", hypotheses[0].weight);
         assert!((hypotheses.iter().map(|h| h.weight).sum::<f64>() - 1.0).abs() < 1e-12);
@@ -98,7 +91,7 @@ mod tests {
         hypotheses[0].weight = 0.7;
         hypotheses[1].weight = 0.3;
         let poses: Vec<FieldPose> = hypotheses.iter().map(|h| h.pose).collect();
-        PlacementPrior::penalty_return().apply(&mut hypotheses);
+        placement().apply(&mut hypotheses);
         assert_eq!(hypotheses.iter().map(|h| h.pose).collect::<Vec<_>>(), poses);
         assert!((hypotheses[0].weight - 0.7).abs() < 1e-9, "both at the floor: the camera's weights stay");
     }
