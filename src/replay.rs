@@ -6,7 +6,7 @@ use std::io::Write;
 use serde::Serialize;
 use tracing::warn;
 
-use crate::eval::{BurstEvaluation, Evaluation, Metrics, RefinedEvaluation, Sample};
+use crate::eval::{BurstEvaluation, Evaluation, Metrics, RefinedEvaluation, RefinedMetrics, Sample};
 use crate::geometry::{FieldPose, PoseSigma};
 use crate::pipeline::{BurstError, Estimate, Pipeline, PlacementPrior};
 use crate::protocol::message::LineEvidence;
@@ -161,6 +161,11 @@ impl FrameReport {
         }
     }
 
+    /// A frame without a network: the recorded truth only (its line points count in its burst).
+    fn lines_only(record: &FrameRecord) -> Self {
+        Self { error: None, ..Self::failure(record, String::new()) }
+    }
+
     fn failure(record: &FrameRecord, error: String) -> Self {
         Self {
             file: record.file.clone(),
@@ -186,6 +191,8 @@ pub struct ReplaySummary {
     pub failed: usize,
     /// The metrics over frames with a true pose, if any.
     pub metrics: Option<Metrics>,
+    /// Without a network: what the lines alone found, over bursts with a true pose.
+    pub lines_alone: Option<RefinedMetrics>,
     /// Each frame with a true pose, evaluated (for plots).
     pub evaluations: Vec<Evaluation>,
 }
@@ -227,7 +234,8 @@ pub fn replay(
                 burst.add(&frame, head_yaw, record.camera.as_ref()).map_err(|error| error.to_string())
             });
             let report = match result {
-                Ok(result) => {
+                Ok(None) => FrameReport::lines_only(record),
+                Ok(Some(result)) => {
                     if let Some(truth) = record.pose {
                         evaluations.push(
                             Sample { truth, head_yaw, prediction: result.prediction.clone() }.evaluate(),
@@ -245,13 +253,19 @@ pub fn replay(
         }
         if burst_size > 1 || options.prior.is_some() || pipeline.checks_lines() {
             let (estimate, _) = burst.finish(options.prior.as_ref());
-            if let (Ok(estimate), Some(truth)) = (&estimate, group[0].pose) {
-                if burst_size > 1 || options.prior.is_some() {
-                    burst_evaluations.push(BurstEvaluation::new(&truth, &estimate.network));
+            match (&estimate, group[0].pose) {
+                (Ok(estimate), Some(truth)) => {
+                    if (burst_size > 1 || options.prior.is_some()) && !estimate.network.is_empty() {
+                        burst_evaluations.push(BurstEvaluation::new(&truth, &estimate.network));
+                    }
+                    if pipeline.checks_lines() {
+                        refined_evaluations.push(RefinedEvaluation::new(&truth, &estimate.hypotheses));
+                    }
                 }
-                if pipeline.checks_lines() {
-                    refined_evaluations.push(RefinedEvaluation::new(&truth, &estimate.hypotheses));
+                (Err(BurstError::NoPlace { points }), Some(_)) => {
+                    refined_evaluations.push(RefinedEvaluation::nothing(*points));
                 }
+                _ => {}
             }
             write_line(out, &BurstReport::new(group, estimate.as_ref()))?;
         }
@@ -260,6 +274,11 @@ pub fn replay(
         frames: recording.records().len(),
         failed,
         metrics: Metrics::summarise(&evaluations, &burst_evaluations, &refined_evaluations),
+        lines_alone: pipeline
+            .relocaliser()
+            .is_none()
+            .then(|| RefinedMetrics::summarise(&refined_evaluations))
+            .flatten(),
         evaluations,
     })
 }
