@@ -76,7 +76,14 @@ fn stages(criterion: &mut Criterion) {
     let mut one = pipeline::fuse(&burst[..1]).unwrap().hypotheses;
     one.truncate(1);
     group.bench_function("refine_one_hypothesis", |b| {
-        b.iter(|| pipeline::verify(&refiner, std::slice::from_ref(&percepts), &mut one.clone()))
+        b.iter(|| {
+            pipeline::verify(
+                &refiner,
+                std::slice::from_ref(&percepts),
+                &mut one.clone(),
+                pipeline::GlobalSearch::Never,
+            )
+        })
     });
     let relocaliser = Relocaliser::new(model);
     group.bench_function("whole_frame", |b| b.iter(|| relocaliser.relocalise(&frame, 0.0)));

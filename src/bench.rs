@@ -11,9 +11,9 @@ use serde::Serialize;
 
 use crate::frame::{Frame, YuyvImage};
 use crate::geometry::{Camera, CameraIntrinsics, CameraPose, FieldModel};
-use crate::pipeline::{self, Pipeline};
+use crate::pipeline::{self, GlobalSearch};
 use crate::refine::LineRefiner;
-use crate::relocaliser::{Backend, Model, Prediction, kernel_isa, preprocess};
+use crate::relocaliser::{Backend, Model, Prediction, Relocaliser, kernel_isa, preprocess};
 use crate::sim::{Randomisation, render};
 
 /// Frames in the fused burst, as the daemon captures by default.
@@ -36,19 +36,22 @@ pub enum Stage {
     Lines,
     /// Refining one hypothesis against those line points (search, fit and verification).
     Refine,
+    /// The global search over the whole field for places those line points fit.
+    Search,
     /// A whole frame: preprocess, inference, unfold.
     Total,
 }
 
 impl Stage {
     /// Every stage, in pipeline order.
-    pub const ALL: [Stage; 7] = [
+    pub const ALL: [Stage; 8] = [
         Stage::Preprocess,
         Stage::Inference,
         Stage::Unfold,
         Stage::Fusion,
         Stage::Lines,
         Stage::Refine,
+        Stage::Search,
         Stage::Total,
     ];
 
@@ -60,6 +63,7 @@ impl Stage {
             Stage::Fusion => "fusion",
             Stage::Lines => "lines",
             Stage::Refine => "refine",
+            Stage::Search => "search",
             Stage::Total => "total",
         }
     }
@@ -76,7 +80,7 @@ impl FromStr for Stage {
 
     fn from_str(name: &str) -> Result<Self, Self::Err> {
         Stage::ALL.into_iter().find(|stage| stage.name() == name).ok_or_else(|| {
-            format!("unknown stage {name:?}: expected preprocess, inference, unfold, fusion, lines, refine or total")
+            format!("unknown stage {name:?}: expected preprocess, inference, unfold, fusion, lines, refine, search or total")
         })
     }
 }
@@ -102,6 +106,9 @@ pub struct StageMedians {
     /// Refining one hypothesis against them.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub refine_ms: Option<f64>,
+    /// The global search for places they fit.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub search_ms: Option<f64>,
     /// A whole frame.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub total_ms: Option<f64>,
@@ -152,8 +159,7 @@ pub fn run(
     let mut heaviest = pipeline::fuse(std::slice::from_ref(&prediction))?.hypotheses;
     heaviest.truncate(1);
     let backend = model.backend();
-    let pipeline = Pipeline::new(model);
-    let relocaliser = pipeline.relocaliser();
+    let relocaliser = Relocaliser::new(model);
 
     let mut medians = StageMedians::default();
     for &stage in stages {
@@ -167,9 +173,10 @@ pub fn run(
             Stage::Lines => {
                 median_ms(iterations, || drop(refiner.percepts(&frame, &intrinsics, &camera_pose)))
             }
-            Stage::Refine => {
-                median_ms(iterations, || pipeline::verify(&refiner, &percepts, &mut heaviest.clone()))
-            }
+            Stage::Refine => median_ms(iterations, || {
+                pipeline::verify(&refiner, &percepts, &mut heaviest.clone(), GlobalSearch::Never)
+            }),
+            Stage::Search => median_ms(iterations, || drop(refiner.search(&percepts))),
             Stage::Total => median_ms(iterations, || drop(relocaliser.relocalise(&frame, 0.0))),
         };
         let slot = match stage {
@@ -179,6 +186,7 @@ pub fn run(
             Stage::Fusion => &mut medians.fusion_ms,
             Stage::Lines => &mut medians.lines_ms,
             Stage::Refine => &mut medians.refine_ms,
+            Stage::Search => &mut medians.search_ms,
             Stage::Total => &mut medians.total_ms,
         };
         *slot = Some(median);
@@ -250,6 +258,7 @@ impl fmt::Display for BenchReport {
             ("fusion (burst of 5)", self.stages.fusion_ms),
             ("lines (one frame)", self.stages.lines_ms),
             ("refine (one hypothesis)", self.stages.refine_ms),
+            ("search (whole field)", self.stages.search_ms),
             ("total (one frame)", self.stages.total_ms),
         ];
         for (name, median) in stages {

@@ -15,8 +15,8 @@ use relocd::bench::Stage;
 use relocd::daemon::config::{Config, Listen, SensorInput, SourceSpec};
 use relocd::daemon::record::RecordOptions;
 use relocd::geometry::{CameraIntrinsics, FieldDimensions, FieldModel, Representation};
-use relocd::pipeline::Pipeline;
 use relocd::pipeline::priors::simulate::PriorSpec;
+use relocd::pipeline::{GlobalSearch, Pipeline};
 use relocd::protocol::address::Address;
 use relocd::protocol::message::Encoding;
 use relocd::recording::{FrameFormat, Recording};
@@ -61,7 +61,8 @@ enum Command {
 /// Which model, run by which engine.
 #[derive(Debug, clap::Args)]
 struct ModelArgs {
-    /// ONNX model file [default: the built-in SqueezeNet half-point model for the engine].
+    /// ONNX model file [default: the built-in SqueezeNet half-point model for the engine]; `replay`
+    /// also takes `none`: no network, the field lines alone.
     #[arg(long)]
     model: Option<PathBuf>,
     /// Inference engine: tract (built in) or onnxruntime (needs the onnxruntime feature and
@@ -71,6 +72,11 @@ struct ModelArgs {
 }
 
 impl ModelArgs {
+    /// Whether `--model none` asks for no network at all.
+    fn is_none(&self) -> bool {
+        self.model.as_deref() == Some(Path::new("none"))
+    }
+
     /// Loads the model; returns it with the name to report.
     fn load(&self) -> anyhow::Result<(Model, String)> {
         let options = LoadOptions { backend: self.backend.unwrap_or_default(), representation: None };
@@ -267,6 +273,10 @@ struct ReplayArgs {
     /// lines in its frames; needs the recording's camera poses. The metrics gain a `refined` block.
     #[arg(long)]
     refine: bool,
+    /// With --refine: when the lines also look for places all over the field (never, when_unsure:
+    /// when the network's heaviest hypothesis is not refined, or always).
+    #[arg(long, default_value = "never", value_name = "WHEN")]
+    global_search: GlobalSearch,
     /// Write plots (error scatter, field map with true and predicted poses) as PNG into this directory.
     #[cfg(feature = "report")]
     #[arg(long, value_name = "DIR")]
@@ -554,24 +564,31 @@ fn replay(args: ReplayArgs) -> anyhow::Result<()> {
             directory.display()
         )
     })?;
-    let (model, _) = args.model.load()?;
-    let contract = model.contract();
-    info!(
-        model = %contract.model_id,
-        representation = %contract.representation,
-        isa = %relocaliser::kernel_isa(),
-        recording = %directory.display(),
-        frames = recording.records().len(),
-        "replaying"
-    );
     anyhow::ensure!(
         (0.0..=0.5).contains(&args.min_share),
         "--min-share {} is not in [0, 0.5]: it is the weight share a prior cannot push a hypothesis below",
         args.min_share
     );
-    let field = FieldModel::new(contract.field.clone());
-    let pipeline = Pipeline::new(model);
-    let pipeline = if args.refine { pipeline.with_lines(&field) } else { pipeline };
+    let (pipeline, field) = if args.model.is_none() {
+        info!(recording = %directory.display(), frames = recording.records().len(), "replaying with the lines alone");
+        let field = FieldModel::default();
+        (Pipeline::lines_only(&field, CameraIntrinsics::nao_top()), field)
+    } else {
+        let (model, _) = args.model.load()?;
+        let contract = model.contract();
+        info!(
+            model = %contract.model_id,
+            representation = %contract.representation,
+            isa = %relocaliser::kernel_isa(),
+            recording = %directory.display(),
+            frames = recording.records().len(),
+            "replaying"
+        );
+        let field = FieldModel::new(contract.field.clone());
+        let pipeline = Pipeline::new(model);
+        let pipeline = if args.refine { pipeline.with_lines(&field) } else { pipeline };
+        (pipeline.with_global_search(args.global_search), field)
+    };
     let stdout = std::io::stdout();
     let summary = relocd::replay::replay(
         &recording,
@@ -595,6 +612,12 @@ fn replay(args: ReplayArgs) -> anyhow::Result<()> {
         eprintln!("{}", metrics.table());
         if let Some(path) = &args.metrics_json {
             let json = serde_json::to_string_pretty(metrics).expect("metrics serialise");
+            std::fs::write(path, json + "\n").with_context(|| format!("writing {}", path.display()))?;
+        }
+    } else if let Some(lines) = &summary.lines_alone {
+        eprintln!("{} bursts, lines alone: {}", lines.bursts, lines.verdicts());
+        if let Some(path) = &args.metrics_json {
+            let json = serde_json::to_string_pretty(lines).expect("metrics serialise");
             std::fs::write(path, json + "\n").with_context(|| format!("writing {}", path.display()))?;
         }
     } else if args.metrics_json.is_some() {

@@ -10,7 +10,8 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
 use crate::eval::{
-    BurstEvaluation, Evaluation, Metrics, RefinedEvaluation, Sample, TwinEvaluation, TwinMetrics,
+    BurstEvaluation, Evaluation, Metrics, RefinedEvaluation, RefinedMetrics, Sample, TwinEvaluation,
+    TwinMetrics,
 };
 use crate::geometry::{FieldPose, PoseSigma};
 use crate::pipeline::priors::simulate::{PriorSpec, priors_for};
@@ -172,6 +173,11 @@ impl FrameReport {
         }
     }
 
+    /// A frame without a network: the recorded truth only (its line points count in its burst).
+    fn lines_only(record: &FrameRecord) -> Self {
+        Self { error: None, ..Self::failure(record, String::new()) }
+    }
+
     fn failure(record: &FrameRecord, error: String) -> Self {
         Self {
             file: record.file.clone(),
@@ -197,6 +203,8 @@ pub struct ReplaySummary {
     pub failed: usize,
     /// The metrics over frames with a true pose, if any.
     pub metrics: Option<Metrics>,
+    /// Without a network: what the lines alone found, over bursts with a true pose.
+    pub lines_alone: Option<RefinedMetrics>,
     /// Each frame with a true pose, evaluated (for plots).
     pub evaluations: Vec<Evaluation>,
 }
@@ -246,7 +254,8 @@ pub fn replay(
                 burst.add(&frame, head_yaw, record.camera.as_ref()).map_err(|error| error.to_string())
             });
             let report = match result {
-                Ok(result) => {
+                Ok(None) => FrameReport::lines_only(record),
+                Ok(Some(result)) => {
                     if let Some(truth) = record.pose {
                         evaluations.push(
                             Sample { truth, head_yaw, prediction: result.prediction.clone() }.evaluate(),
@@ -265,20 +274,26 @@ pub fn replay(
         if burst_size > 1 || with_priors || pipeline.checks_lines() {
             let priors = priors_for(&options.priors, group[0].pose.as_ref(), options.min_share, &mut rng);
             let (estimate, _) = burst.finish(&priors);
-            if let (Ok(estimate), Some(truth)) = (&estimate, group[0].pose) {
-                if burst_size > 1 || with_priors {
-                    burst_evaluations.push(BurstEvaluation::new(&truth, &estimate.network));
+            match (&estimate, group[0].pose) {
+                (Ok(estimate), Some(truth)) => {
+                    if (burst_size > 1 || with_priors) && !estimate.network.is_empty() {
+                        burst_evaluations.push(BurstEvaluation::new(&truth, &estimate.network));
+                    }
+                    if pipeline.checks_lines() {
+                        refined_evaluations.push(RefinedEvaluation::new(&truth, &estimate.hypotheses));
+                    }
+                    if with_priors {
+                        twin_evaluations.push(TwinEvaluation::new(
+                            &truth,
+                            &estimate.hypotheses,
+                            &estimate.priors.before,
+                        ));
+                    }
                 }
-                if pipeline.checks_lines() {
-                    refined_evaluations.push(RefinedEvaluation::new(&truth, &estimate.hypotheses));
+                (Err(BurstError::NoPlace { points }), Some(_)) => {
+                    refined_evaluations.push(RefinedEvaluation::nothing(*points));
                 }
-                if with_priors {
-                    twin_evaluations.push(TwinEvaluation::new(
-                        &truth,
-                        &estimate.hypotheses,
-                        &estimate.priors.before,
-                    ));
-                }
+                _ => {}
             }
             write_line(out, &BurstReport::new(group, estimate.as_ref()))?;
         }
@@ -292,6 +307,11 @@ pub fn replay(
                 metrics
             },
         ),
+        lines_alone: pipeline
+            .relocaliser()
+            .is_none()
+            .then(|| RefinedMetrics::summarise(&refined_evaluations))
+            .flatten(),
         evaluations,
     })
 }

@@ -9,7 +9,7 @@
 use image::{Rgb, RgbImage};
 use relocd::frame::{Frame, YuyvImage};
 use relocd::geometry::{Camera, CameraIntrinsics, CameraPose, FieldModel, FieldPose, PoseSigma, Symmetry};
-use relocd::pipeline::{Hypothesis, verify};
+use relocd::pipeline::{GlobalSearch, Hypothesis, verify};
 use relocd::refine::line_map::Primitive;
 use relocd::refine::{FramePercepts, LineCheck, LineRefiner, PerceptError};
 use relocd::sim::{Randomisation, SampledFrame, render};
@@ -133,7 +133,7 @@ fn refinement_recovers_perturbed_poses() {
         )
         .unwrap();
         let mut estimate = hypotheses(&[(start, 1.0)], cnn_sigma());
-        verify(&refiner, std::slice::from_ref(&percepts), &mut estimate);
+        verify(&refiner, std::slice::from_ref(&percepts), &mut estimate, GlobalSearch::Never);
         let result = &estimate[0];
         let heading_error = (result.pose.heading() - truth.heading()).sin().abs().asin().to_degrees();
         if result.pose.distance_to(&truth) <= 0.05 && heading_error <= 1.0 {
@@ -170,7 +170,7 @@ fn lines_down_weight_a_contradicted_hypothesis_and_tie_point_twins() {
     // A wrong hypothesis: the mirror image, which sees the lines mirrored.
     let wrong = Symmetry::MirrorLongAxis.apply(&truth);
     let mut estimate = hypotheses(&[(truth, 0.3), (twin, 0.2), (wrong, 0.5)], cnn_sigma());
-    verify(&refiner, std::slice::from_ref(&percepts), &mut estimate);
+    verify(&refiner, std::slice::from_ref(&percepts), &mut estimate, GlobalSearch::Never);
     let find =
         |pose: &FieldPose| estimate.iter().find(|h| h.pose.distance_to(pose) < 0.2).expect("hypothesis kept");
     let (kept, kept_twin, contradicted) = (find(&truth), find(&twin), find(&wrong));
@@ -199,7 +199,7 @@ fn frames_without_lines_stay_unrefined() {
     for frame in [carpet, black, noise] {
         let percepts = refiner.percepts(&frame, &CameraIntrinsics::nao_top(), &camera).unwrap();
         let mut estimate = hypotheses(&[(pose, 1.0)], cnn_sigma());
-        verify(&refiner, std::slice::from_ref(&percepts), &mut estimate);
+        verify(&refiner, std::slice::from_ref(&percepts), &mut estimate, GlobalSearch::Never);
         let only = &estimate[0];
         assert_eq!(only.lines.unwrap().check, LineCheck::Unrefined);
         assert_eq!((only.pose, only.sigma), (pose, cnn_sigma()), "the network's hypothesis as it was");

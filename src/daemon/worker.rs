@@ -16,7 +16,7 @@ use super::queue::{TriggerEvent, TriggerQueue};
 use super::source::{CaptureRequest, FrameSource, capture, sleep_unless_stopped, unix_now};
 use super::status::Status;
 use super::triggers::Sensed;
-use crate::geometry::{CameraMounting, FieldPose};
+use crate::geometry::{CameraMounting, FieldPose, Representation};
 use crate::pipeline::{Pipeline, Priors, StageTimes};
 use crate::protocol::message::{FrameCounts, Latency, Message, ModelInfo, SCHEMA_VERSION, Trigger};
 use crate::relocaliser::Model;
@@ -130,7 +130,13 @@ impl Worker {
 
     /// One burst for `batch`, as a message.
     fn relocalise(&mut self, seq: u64, batch: &[TriggerEvent]) -> Message {
-        let contract = self.pipeline.relocaliser().model().contract();
+        let model = match self.pipeline.relocaliser() {
+            Some(relocaliser) => {
+                let contract = relocaliser.model().contract();
+                ModelInfo { id: contract.model_id.clone(), representation: contract.representation }
+            }
+            None => ModelInfo { id: "none".into(), representation: Representation::Full },
+        };
         let head_yaw = batch.iter().rev().find_map(|trigger| trigger.head_yaw);
         let priors = priors_for_batch(batch, &self.priors, self.goalkeeper);
         let mut message = Message {
@@ -147,7 +153,7 @@ impl Worker {
                     t: trigger.t,
                 })
                 .collect(),
-            model: ModelInfo { id: contract.model_id.clone(), representation: contract.representation },
+            model,
             frames: FrameCounts { requested: self.burst.frames as u32, used: 0, agreeing: 0 },
             prior: None,
             priors: Vec::new(),

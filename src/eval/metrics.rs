@@ -3,7 +3,7 @@
 use serde::Serialize;
 
 use crate::geometry::angle::angle_distance;
-use crate::geometry::{FieldPose, FoldClass, Representation};
+use crate::geometry::{FieldPose, FoldClass, Representation, Symmetry};
 use crate::pipeline::Hypothesis;
 use crate::refine::LineCheck;
 use crate::relocaliser::Prediction;
@@ -121,21 +121,46 @@ impl BurstEvaluation {
     }
 }
 
+/// A hypothesis this close to the truth (metres, degrees) counts as found.
+pub const FOUND: (f64, f64) = (0.05, 1.0);
+/// Fewest line points for a burst to count as one the lines can settle (the refinement's own minimum).
+pub const LINE_POINTS: usize = 12;
+
 /// One burst after line refinement: its errors and what the lines did to its heaviest hypothesis.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RefinedEvaluation {
-    /// The refined hypotheses against the truth.
-    pub errors: BurstEvaluation,
+    /// The refined hypotheses against the truth (`None`: there were none).
+    pub errors: Option<BurstEvaluation>,
     /// What the lines did to the heaviest hypothesis (`None` if it was never checked).
     pub check: Option<LineCheck>,
+    /// Line points the burst had.
+    pub points: usize,
+    /// Whether some hypothesis lies within [`FOUND`] of the truth.
+    pub found: bool,
+    /// Whether the heaviest hypothesis lies within [`FOUND`] of the truth or of its point twin.
+    pub heaviest_right: bool,
 }
 
 impl RefinedEvaluation {
+    /// A burst with no hypothesis at all (no network, and no place fits its `points` line points).
+    pub fn nothing(points: usize) -> Self {
+        Self { errors: None, check: None, points, found: false, heaviest_right: false }
+    }
+
     /// Scores a refined burst's hypotheses (heaviest first, at least one) against the robot's true pose.
     pub fn new(truth: &FieldPose, hypotheses: &[Hypothesis]) -> Self {
+        let close = |pose: &FieldPose, truth: &FieldPose| {
+            let (metres, degrees) = pose_error(pose, truth);
+            metres <= FOUND.0 && degrees <= FOUND.1
+        };
+        let twin = Symmetry::PointReflection.apply(truth);
+        let heaviest = &hypotheses[0];
         Self {
-            errors: BurstEvaluation::new(truth, hypotheses),
-            check: hypotheses[0].lines.map(|lines| lines.check),
+            errors: Some(BurstEvaluation::new(truth, hypotheses)),
+            check: heaviest.lines.map(|lines| lines.check),
+            points: heaviest.lines.map_or(0, |lines| lines.points),
+            found: hypotheses.iter().any(|h| close(&h.pose, truth)),
+            heaviest_right: close(&heaviest.pose, truth) || close(&heaviest.pose, &twin),
         }
     }
 }
@@ -153,6 +178,15 @@ pub struct RefinedMetrics {
     pub unrefined_share: f64,
     /// Share whose heaviest hypothesis the lines contradicted.
     pub contradicted_share: f64,
+    /// Share whose heaviest hypothesis is one of several places the lines fit (`ambiguous`).
+    pub ambiguous_share: f64,
+    /// Bursts with at least [`LINE_POINTS`] line points.
+    pub with_lines: usize,
+    /// Of those, the share with a hypothesis within 5 cm and 1° of the truth.
+    pub found_share_with_lines: f64,
+    /// Bursts whose heaviest hypothesis is `refined` but neither the truth nor its point twin lies
+    /// within 5 cm and 1° of it, as a share of the `refined` bursts.
+    pub wrong_refined_share: f64,
     /// Heaviest hypothesis vs truth, all bursts.
     pub modelled: ErrorStats,
     /// Closest hypothesis vs truth, all bursts.
@@ -171,22 +205,35 @@ impl RefinedMetrics {
         let share = |check: LineCheck| {
             evaluations.iter().filter(|e| e.check == Some(check)).count() as f64 / evaluations.len() as f64
         };
+        let with_lines = evaluations.iter().filter(|e| e.points >= LINE_POINTS).count();
+        let ratio = |count: usize, of: usize| if of == 0 { 0.0 } else { count as f64 / of as f64 };
         let refined: Vec<(f64, f64)> = evaluations
             .iter()
             .filter(|e| e.check == Some(LineCheck::Refined))
-            .map(|e| e.errors.best_of_set)
+            .filter_map(|e| e.errors.map(|errors| errors.best_of_set))
             .collect();
+        let errors: Vec<&BurstEvaluation> = evaluations.iter().filter_map(|e| e.errors.as_ref()).collect();
         Some(Self {
             bursts: evaluations.len(),
             refined_share: share(LineCheck::Refined),
             partial_share: share(LineCheck::Partial),
             unrefined_share: share(LineCheck::Unrefined),
             contradicted_share: share(LineCheck::Contradicted),
-            modelled: ErrorStats::of(&evaluations.iter().map(|e| e.errors.modelled).collect::<Vec<_>>(), &[]),
-            best_of_set: ErrorStats::of(
-                &evaluations.iter().map(|e| e.errors.best_of_set).collect::<Vec<_>>(),
-                &[],
+            ambiguous_share: share(LineCheck::Ambiguous),
+            with_lines,
+            found_share_with_lines: ratio(
+                evaluations.iter().filter(|e| e.points >= LINE_POINTS && e.found).count(),
+                with_lines,
             ),
+            wrong_refined_share: ratio(
+                evaluations
+                    .iter()
+                    .filter(|e| e.check == Some(LineCheck::Refined) && !e.heaviest_right)
+                    .count(),
+                refined.len(),
+            ),
+            modelled: ErrorStats::of(&errors.iter().map(|e| e.modelled).collect::<Vec<_>>(), &[]),
+            best_of_set: ErrorStats::of(&errors.iter().map(|e| e.best_of_set).collect::<Vec<_>>(), &[]),
             where_refined: (!refined.is_empty()).then(|| ErrorStats::of(&refined, &[])),
         })
     }
@@ -398,18 +445,30 @@ impl Metrics {
             if let Some(where_refined) = &refined.where_refined {
                 text += &row("  refined", where_refined);
             }
-            counts += &format!(
-                ", lines: {:.0}% refined, {:.0}% partial, {:.0}% unrefined, {:.0}% contradicted",
-                100.0 * refined.refined_share,
-                100.0 * refined.partial_share,
-                100.0 * refined.unrefined_share,
-                100.0 * refined.contradicted_share
-            );
+            counts += &format!(", lines: {}", refined.verdicts());
         }
         if let Some(twins) = &self.twins {
             counts += &format!("\n{}", twins.line());
         }
         text + &counts
+    }
+}
+
+impl RefinedMetrics {
+    /// The verdict shares and what the lines found, in one line for people.
+    pub fn verdicts(&self) -> String {
+        format!(
+            "{:.0}% refined, {:.0}% partial, {:.0}% ambiguous, {:.0}% unrefined, {:.0}% contradicted; \
+             with >= {LINE_POINTS} line points ({}): {:.1}% found within 5 cm / 1°; {:.1}% of refined wrong",
+            100.0 * self.refined_share,
+            100.0 * self.partial_share,
+            100.0 * self.ambiguous_share,
+            100.0 * self.unrefined_share,
+            100.0 * self.contradicted_share,
+            self.with_lines,
+            100.0 * self.found_share_with_lines,
+            100.0 * self.wrong_refined_share
+        )
     }
 }
 

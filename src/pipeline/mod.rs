@@ -16,8 +16,11 @@ use thiserror::Error;
 pub use priors::{PlacementPrior, PriorReport, Priors};
 
 use crate::frame::Frame;
-use crate::geometry::{CameraIntrinsics, CameraPose, FieldModel, FieldPose, PoseSigma};
-use crate::refine::{FramePercepts, Guess, LineEvidence, LineRefiner, LineVerdict};
+use crate::geometry::angle::angle_distance;
+use crate::geometry::{CameraIntrinsics, CameraPose, FieldModel, FieldPose, PoseSigma, Symmetry};
+use crate::refine::{
+    FramePercepts, Guess, LineCheck, LineEvidence, LineFit, LineRefiner, LineVerdict, same_place_or_twin,
+};
 use crate::relocaliser::{
     FusionError, Model, Prediction, Relocalisation, RelocaliseError, Relocaliser, fuse as fuse_frames,
 };
@@ -58,6 +61,12 @@ pub enum BurstError {
     /// Every frame failed in the network; the first failure.
     #[error("no frame could be relocalised: {0}")]
     NoFrameRelocalised(String),
+    /// Without a network, the lines are all there is, and they fit no place on the field.
+    #[error("no network, and the {points} line points of the burst fit no place on the field")]
+    NoPlace {
+        /// Line points of the burst.
+        points: usize,
+    },
     /// The predictions could not be fused.
     #[error(transparent)]
     Fusion(#[from] FusionError),
@@ -76,11 +85,12 @@ pub struct StageTimes {
     pub lines_ms: f64,
 }
 
-/// A network, and optionally a field whose lines check what it says.
+/// A network, and optionally a field whose lines check what it says; or the lines alone.
 #[derive(Debug)]
 pub struct Pipeline {
-    relocaliser: Relocaliser,
+    relocaliser: Option<Relocaliser>,
     refiner: Option<LineRefiner>,
+    search: GlobalSearch,
     intrinsics: CameraIntrinsics,
 }
 
@@ -89,7 +99,23 @@ impl Pipeline {
     /// names (the camera its training frames emulate).
     pub fn new(model: Model) -> Self {
         let intrinsics = model.contract().camera;
-        Self { relocaliser: Relocaliser::new(model), refiner: None, intrinsics }
+        Self {
+            relocaliser: Some(Relocaliser::new(model)),
+            refiner: None,
+            search: GlobalSearch::default(),
+            intrinsics,
+        }
+    }
+
+    /// No network: the lines of `field` alone, searched all over the field after every burst, with
+    /// frames taken by a camera with `intrinsics`. For a hall with no network trained for it yet.
+    pub fn lines_only(field: &FieldModel, intrinsics: CameraIntrinsics) -> Self {
+        Self {
+            relocaliser: None,
+            refiner: Some(LineRefiner::new(field)),
+            search: GlobalSearch::Always,
+            intrinsics,
+        }
     }
 
     /// Verifies and refines every burst against the lines of `field` (builds its distance map once).
@@ -98,9 +124,15 @@ impl Pipeline {
         self
     }
 
-    /// The network.
-    pub fn relocaliser(&self) -> &Relocaliser {
-        &self.relocaliser
+    /// Sets when the lines look for places all over the field (see [`GlobalSearch`]).
+    pub fn with_global_search(mut self, search: GlobalSearch) -> Self {
+        self.search = search;
+        self
+    }
+
+    /// The network, if there is one.
+    pub fn relocaliser(&self) -> Option<&Relocaliser> {
+        self.relocaliser.as_ref()
     }
 
     /// Whether bursts are checked against the field lines.
@@ -112,13 +144,14 @@ impl Pipeline {
     /// lines are checked stays).
     pub fn replace_model(&mut self, model: Model) {
         self.intrinsics = model.contract().camera;
-        self.relocaliser = Relocaliser::new(model);
+        self.relocaliser = Some(Relocaliser::new(model));
     }
 
     /// Starts a burst: add its frames as they arrive, then finish it.
     pub fn burst(&self) -> Burst<'_> {
         Burst {
             pipeline: self,
+            frames: 0,
             predictions: Vec::new(),
             percepts: Vec::new(),
             failures: Vec::new(),
@@ -131,6 +164,7 @@ impl Pipeline {
 #[derive(Debug)]
 pub struct Burst<'p> {
     pipeline: &'p Pipeline,
+    frames: usize,
     predictions: Vec<Prediction>,
     percepts: Vec<FramePercepts>,
     failures: Vec<String>,
@@ -138,15 +172,17 @@ pub struct Burst<'p> {
 }
 
 impl Burst<'_> {
-    /// Relocalises one frame taken with the head turned by `head_yaw` radians and, when the pipeline
-    /// checks lines and `camera` (the camera's pose on the robot) is known, finds its line points. A
-    /// frame whose line points cannot be found still counts for the network (the log says why).
+    /// Relocalises one frame taken with the head turned by `head_yaw` radians (`None` without a
+    /// network) and, when the pipeline checks lines and `camera` (the camera's pose on the robot) is
+    /// known, finds its line points. A frame whose line points cannot be found still counts for the
+    /// network (the log says why).
     pub fn add(
         &mut self,
         frame: &Frame,
         head_yaw: f64,
         camera: Option<&CameraPose>,
-    ) -> Result<Relocalisation, RelocaliseError> {
+    ) -> Result<Option<Relocalisation>, RelocaliseError> {
+        self.frames += 1;
         if let (Some(refiner), Some(camera)) = (&self.pipeline.refiner, camera) {
             let started = Instant::now();
             match refiner.percepts(frame, &self.pipeline.intrinsics, camera) {
@@ -155,13 +191,14 @@ impl Burst<'_> {
             }
             self.times.lines_ms += started.elapsed().as_secs_f64() * 1e3;
         }
-        match self.pipeline.relocaliser.relocalise(frame, head_yaw) {
+        let Some(relocaliser) = &self.pipeline.relocaliser else { return Ok(None) };
+        match relocaliser.relocalise(frame, head_yaw) {
             Ok(result) => {
                 self.times.preprocess_ms += result.timings.preprocess_ms;
                 self.times.inference_ms += result.timings.inference_ms;
                 self.times.fusion_ms += result.timings.decode_ms;
                 self.predictions.push(result.prediction.clone());
-                Ok(result)
+                Ok(Some(result))
             }
             Err(error) => {
                 self.failures.push(error.to_string());
@@ -178,6 +215,12 @@ impl Burst<'_> {
     /// Fuses the frames, verifies the result against the lines and re-weights it with the burst's
     /// `priors`; returns the estimate and where the burst's time went.
     pub fn finish(mut self, priors: &Priors) -> (Result<Estimate, BurstError>, StageTimes) {
+        if self.pipeline.relocaliser.is_none() {
+            let started = Instant::now();
+            let estimate = self.lines_alone(priors);
+            self.times.lines_ms += started.elapsed().as_secs_f64() * 1e3;
+            return (estimate, self.times);
+        }
         let fusing = Instant::now();
         let fused = fuse(&self.predictions).map_err(|error| match self.failures.first() {
             Some(failure) => BurstError::NoFrameRelocalised(failure.clone()),
@@ -190,7 +233,7 @@ impl Burst<'_> {
         };
         if let Some(refiner) = &self.pipeline.refiner {
             let verifying = Instant::now();
-            verify(refiner, &self.percepts, &mut estimate.hypotheses);
+            verify(refiner, &self.percepts, &mut estimate.hypotheses, self.pipeline.search);
             self.times.lines_ms += verifying.elapsed().as_secs_f64() * 1e3;
         }
         if !priors.is_empty() {
@@ -200,6 +243,26 @@ impl Burst<'_> {
             self.times.fusion_ms += weighing.elapsed().as_secs_f64() * 1e3;
         }
         (Ok(estimate), self.times)
+    }
+
+    /// The estimate of a pipeline without a network: every place the lines fit, and its twin.
+    fn lines_alone(&self, priors: &Priors) -> Result<Estimate, BurstError> {
+        let mut hypotheses = Vec::new();
+        if let Some(refiner) = &self.pipeline.refiner {
+            verify(refiner, &self.percepts, &mut hypotheses, GlobalSearch::Always);
+        }
+        if hypotheses.is_empty() {
+            let points = self.percepts.iter().map(|frame| frame.points.len()).sum();
+            return Err(BurstError::NoPlace { points });
+        }
+        let report = if priors.is_empty() { PriorReport::default() } else { priors.apply(&mut hypotheses) };
+        Ok(Estimate {
+            hypotheses,
+            network: Vec::new(),
+            frames: self.frames,
+            agreeing: self.frames,
+            priors: report,
+        })
     }
 }
 
@@ -221,27 +284,130 @@ pub fn fuse(predictions: &[Prediction]) -> Result<Estimate, FusionError> {
     })
 }
 
+/// When the lines look for places all over the field, beyond the network's hypotheses.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum GlobalSearch {
+    /// Never: the lines only check the network's hypotheses (the default until the search is measured
+    /// on held-out sets).
+    #[default]
+    Never,
+    /// When the lines do not refine the network's heaviest hypothesis (contradicted or partial).
+    WhenUnsure,
+    /// After every burst with enough line points (also catches a refinement that locked onto the
+    /// wrong one of several places that look alike).
+    Always,
+}
+
+impl std::str::FromStr for GlobalSearch {
+    type Err = String;
+
+    fn from_str(name: &str) -> Result<Self, Self::Err> {
+        match name {
+            "never" => Ok(Self::Never),
+            "when_unsure" => Ok(Self::WhenUnsure),
+            "always" => Ok(Self::Always),
+            _ => Err(format!("unknown global search {name:?}: expected never, when_unsure or always")),
+        }
+    }
+}
+
+/// Share of the weight a line-consistent place keeps however far the network's hypotheses are (the
+/// network is a prior over the places the lines allow, not a gate).
+const NETWORK_FLOOR: f64 = 0.05;
+/// Least spread of a network hypothesis when it weighs places (metres, radians).
+const MIN_NETWORK_SIGMA: (f64, f64) = (0.1, 0.05);
+
 /// Verifies and refines `hypotheses` against the line points of a burst's frames: each takes the fitted
 /// pose and σ where the lines support it, every one gets the lines' evidence, and the weights are
 /// scaled by the fits' quality (contradicted ones cut), renormalised and sorted heaviest first.
-pub fn verify(refiner: &LineRefiner, percepts: &[FramePercepts], hypotheses: &mut [Hypothesis]) {
+/// Where `search` says so, the lines also look all over the field: if they fit any place, the
+/// hypotheses become those places and their point-symmetric twins, weighted by the fit's quality and
+/// by how likely the network's hypotheses make them (never below a floor), and marked `ambiguous` when
+/// there is more than one place.
+pub fn verify(
+    refiner: &LineRefiner,
+    percepts: &[FramePercepts],
+    hypotheses: &mut Vec<Hypothesis>,
+    search: GlobalSearch,
+) {
     let guesses: Vec<Guess> = hypotheses.iter().map(|h| Guess { pose: h.pose, sigma: h.sigma }).collect();
-    match refiner.check(percepts, &guesses) {
+    let fits = match refiner.check(percepts, &guesses) {
         LineVerdict::TooFewPoints(evidence) => {
             hypotheses.iter_mut().for_each(|hypothesis| hypothesis.lines = Some(evidence));
+            return;
         }
-        LineVerdict::Checked(fits) => {
-            for (hypothesis, fit) in hypotheses.iter_mut().zip(fits) {
-                *hypothesis = Hypothesis {
-                    pose: fit.pose,
-                    weight: hypothesis.weight * fit.factor,
-                    sigma: fit.sigma,
-                    lines: Some(fit.evidence),
-                };
+        LineVerdict::Checked(fits) => fits,
+    };
+    let heaviest = hypotheses
+        .iter()
+        .zip(&fits)
+        .max_by(|(a, fa), (b, fb)| (a.weight * fa.factor).total_cmp(&(b.weight * fb.factor)))
+        .map(|(_, fit)| fit.evidence.check);
+    let look = match search {
+        GlobalSearch::Never => false,
+        GlobalSearch::WhenUnsure => heaviest != Some(LineCheck::Refined),
+        GlobalSearch::Always => true,
+    };
+    let places = if look { places(refiner, percepts, &fits) } else { Vec::new() };
+    if places.is_empty() {
+        for (hypothesis, fit) in hypotheses.iter_mut().zip(fits) {
+            *hypothesis = Hypothesis {
+                pose: fit.pose,
+                weight: hypothesis.weight * fit.factor,
+                sigma: fit.sigma,
+                lines: Some(fit.evidence),
+            };
+        }
+    } else {
+        let network = std::mem::take(hypotheses);
+        let count = places.len();
+        for place in places {
+            let evidence = LineEvidence {
+                check: if count > 1 { LineCheck::Ambiguous } else { place.evidence.check },
+                places: Some(count),
+                ..place.evidence
+            };
+            for pose in [place.pose, Symmetry::PointReflection.apply(&place.pose)] {
+                let weight = place.factor * (NETWORK_FLOOR + network_likelihood(&pose, &network));
+                hypotheses.push(Hypothesis { pose, weight, sigma: place.sigma, lines: Some(evidence) });
             }
-            let total: f64 = hypotheses.iter().map(|hypothesis| hypothesis.weight).sum();
-            hypotheses.iter_mut().for_each(|hypothesis| hypothesis.weight /= total);
-            hypotheses.sort_by(|a, b| b.weight.total_cmp(&a.weight));
         }
     }
+    let total: f64 = hypotheses.iter().map(|hypothesis| hypothesis.weight).sum();
+    hypotheses.iter_mut().for_each(|hypothesis| hypothesis.weight /= total);
+    hypotheses.sort_by(|a, b| b.weight.total_cmp(&a.weight));
+}
+
+/// The places the lines fit: the network's hypotheses the lines supported and what the global search
+/// found, one per point-symmetric pair.
+fn places(refiner: &LineRefiner, percepts: &[FramePercepts], fits: &[LineFit]) -> Vec<LineFit> {
+    let mut places: Vec<LineFit> = Vec::new();
+    let supported = fits.iter().filter(|fit| fit.evidence.check != LineCheck::Contradicted).copied();
+    for place in supported.chain(refiner.search(percepts)) {
+        if !places.iter().any(|known| same_place_or_twin(&known.pose, &place.pose)) {
+            places.push(place);
+        }
+    }
+    places
+}
+
+/// How likely the network's hypotheses (a mixture of Gaussians with their weights and spreads) make
+/// `pose`, relative to the likelihood at a hypothesis' centre; 1 when there is no network.
+fn network_likelihood(pose: &FieldPose, network: &[Hypothesis]) -> f64 {
+    if network.is_empty() {
+        return 1.0;
+    }
+    network
+        .iter()
+        .map(|hypothesis| {
+            let sigma = &hypothesis.sigma;
+            let dx = (pose.x() - hypothesis.pose.x()) / sigma.x.max(MIN_NETWORK_SIGMA.0);
+            let dy = (pose.y() - hypothesis.pose.y()) / sigma.y.max(MIN_NETWORK_SIGMA.0);
+            let dtheta = angle_distance(pose.heading(), hypothesis.pose.heading())
+                / sigma.theta.max(MIN_NETWORK_SIGMA.1);
+            let exponent = -0.5 * (dx * dx + dy * dy + dtheta * dtheta);
+            hypothesis.weight * if exponent.is_finite() { exponent.exp() } else { 0.0 }
+        })
+        .sum()
 }

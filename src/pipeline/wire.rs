@@ -12,6 +12,7 @@ impl From<LineCheck> for message::LineCheck {
             LineCheck::Partial => Self::Partial,
             LineCheck::Unrefined => Self::Unrefined,
             LineCheck::Contradicted => Self::Contradicted,
+            LineCheck::Ambiguous => Self::Ambiguous,
         }
     }
 }
@@ -23,6 +24,7 @@ impl From<LineEvidence> for message::LineEvidence {
             points: evidence.points,
             inlier_share: evidence.inlier_share,
             unseen_share: evidence.unseen_share,
+            places: evidence.places,
         }
     }
 }

@@ -130,6 +130,9 @@ pub enum LineCheck {
     Unrefined,
     /// The lines seen do not fit this pose cleanly: the network's pose, with its weight cut.
     Contradicted,
+    /// The lines fit this pose and other places on the field as well (`places` says how many): the
+    /// network and the priors weigh them.
+    Ambiguous,
 }
 
 /// The field lines' evidence about a hypothesis.
@@ -144,6 +147,10 @@ pub struct LineEvidence {
     /// Share of the lines the camera should have seen under the pose that it did not; absent when too
     /// few were expected to tell.
     pub unseen_share: Option<f64>,
+    /// How many places on the field (a point-symmetric pair counted once) the lines fit, when the
+    /// global search looked.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub places: Option<usize>,
 }
 
 /// One weighted full-field robot pose.
@@ -308,6 +315,7 @@ mod tests {
                         points: 140,
                         inlier_share: 0.98,
                         unseen_share: Some(0.05),
+                        places: None,
                     }),
                 },
                 Hypothesis {

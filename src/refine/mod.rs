@@ -11,6 +11,7 @@
 pub mod line_map;
 pub mod optimise;
 pub mod percepts;
+pub mod search;
 
 use nalgebra::{Point2, Point3, Vector3};
 
@@ -21,6 +22,7 @@ use crate::frame::Frame;
 use crate::geometry::angle::angle_distance;
 use crate::geometry::{CameraIntrinsics, CameraPose, FieldModel, FieldPose, PoseSigma, Symmetry};
 use optimise::{Observation, Prior, fit};
+use search::SearchMap;
 
 /// Fewest line points a burst needs for refinement.
 pub const MIN_POINTS: usize = 12;
@@ -51,6 +53,13 @@ const REFINED_SIGMA: (f64, f64) = (0.1, 0.035);
 const MIN_PRIOR_SIGMA: (f64, f64) = (0.15, 0.09);
 /// Largest prior σ the search covers.
 const MAX_PRIOR_SIGMA: (f64, f64) = (0.6, 0.35);
+/// Coarse-grid candidates the global search fits and checks, at most.
+const SEARCH_CANDIDATES: usize = 10;
+/// Candidates whose points lie farther than this from the lines on average (metres, on the coarse
+/// grid) are not worth a fit.
+const SEARCH_MAX_MEAN_DISTANCE: f64 = 0.12;
+/// Fits closer than this (metres, radians) are one place.
+const SAME_PLACE: (f64, f64) = (0.1, 0.035);
 
 /// What the lines made of one hypothesis.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -65,6 +74,9 @@ pub enum LineCheck {
     /// The lines seen do not fit this pose cleanly (points off the lines, or lines it should show
     /// missing): kept at the network's pose with its weight cut.
     Contradicted,
+    /// The lines fit this pose, and other places on the field just as well (a corner, two parallel
+    /// lines): one of several line-consistent places, weighted by the network and the priors.
+    Ambiguous,
 }
 
 /// The lines' evidence about one hypothesis.
@@ -79,6 +91,9 @@ pub struct LineEvidence {
     /// Share of the field lines the camera should have seen under the pose that it did not see;
     /// `None` when too few lines were expected to tell.
     pub unseen_share: Option<f64>,
+    /// How many places on the field (a point-symmetric pair counted once) the lines fit, when the
+    /// global search looked; `None` when it did not.
+    pub places: Option<usize>,
 }
 
 /// A pose to verify, and the spread around it the fit may search.
@@ -116,6 +131,7 @@ pub enum LineVerdict {
 #[derive(Clone, Debug)]
 pub struct LineRefiner {
     map: LineMap,
+    search: SearchMap,
     line_width: f64,
     /// Samples along every painted line, field frame.
     line_samples: Vec<Point2<f64>>,
@@ -127,7 +143,8 @@ impl LineRefiner {
         let map = LineMap::new(field);
         let line_samples =
             map.primitives().iter().flat_map(|primitive| primitive.samples(EXPECTED_SPACING)).collect();
-        Self { map, line_width: field.dimensions().line_width, line_samples }
+        let search = SearchMap::new(field, &map);
+        Self { map, search, line_width: field.dimensions().line_width, line_samples }
     }
 
     /// The field's distance map.
@@ -156,6 +173,7 @@ impl LineRefiner {
                 points: observations.len(),
                 inlier_share: 0.0,
                 unseen_share: None,
+                places: None,
             });
         }
         let mut fits: Vec<LineFit> = Vec::with_capacity(guesses.len());
@@ -174,6 +192,33 @@ impl LineRefiner {
             });
         }
         LineVerdict::Checked(fits)
+    }
+
+    /// Every place on the carpet whose pose the burst's line points fit (refined or partial), one per
+    /// point-symmetric pair (the caller adds the twins), best fit first: the coarse grid's best
+    /// candidates ([`search`]), each fitted and checked as a guess would be. Empty with too few points.
+    pub fn search(&self, frames: &[FramePercepts]) -> Vec<LineFit> {
+        let observations = observations(frames);
+        if observations.len() < MIN_POINTS {
+            return Vec::new();
+        }
+        let (step, turn) = search::grid_spacing();
+        let sigma = PoseSigma { x: step, y: step, theta: turn };
+        let mut places: Vec<LineFit> = Vec::new();
+        for candidate in self.search.candidates(&observations, SEARCH_CANDIDATES) {
+            if candidate.mean_distance > SEARCH_MAX_MEAN_DISTANCE {
+                break;
+            }
+            let fit = self.check_one(frames, &observations, &Guess { pose: candidate.pose, sigma });
+            if fit.evidence.check == LineCheck::Contradicted
+                || places.iter().any(|place| same_place_or_twin(&place.pose, &fit.pose))
+            {
+                continue;
+            }
+            places.push(fit);
+        }
+        places.sort_by(|a, b| b.factor.total_cmp(&a.factor));
+        places
     }
 
     /// Fits and checks one guess.
@@ -198,7 +243,13 @@ impl LineRefiner {
             return LineFit {
                 pose: guess.pose,
                 sigma: guess.sigma,
-                evidence: LineEvidence { check: LineCheck::Contradicted, points, inlier_share, unseen_share },
+                evidence: LineEvidence {
+                    check: LineCheck::Contradicted,
+                    points,
+                    inlier_share,
+                    unseen_share,
+                    places: None,
+                },
                 factor: quality.max(0.01).powi(2) * CONTRADICTED_FACTOR,
             };
         }
@@ -215,7 +266,7 @@ impl LineRefiner {
         LineFit {
             pose: fitted.pose,
             sigma: PoseSigma { x: sigma.x, y: sigma.y, theta: sigma.z },
-            evidence: LineEvidence { check, points, inlier_share, unseen_share },
+            evidence: LineEvidence { check, points, inlier_share, unseen_share, places: None },
             factor: quality.powi(2),
         }
     }
@@ -257,6 +308,14 @@ impl LineRefiner {
         }
         (expected >= MIN_EXPECTED).then(|| unseen as f64 / expected as f64)
     }
+}
+
+/// Whether two fitted poses are one place on the field, or point-symmetric twins of one.
+pub fn same_place_or_twin(a: &FieldPose, b: &FieldPose) -> bool {
+    let same = |a: &FieldPose, b: &FieldPose| {
+        a.distance_to(b) <= SAME_PLACE.0 && angle_distance(a.heading(), b.heading()) <= SAME_PLACE.1
+    };
+    same(a, b) || same(&Symmetry::PointReflection.apply(a), b)
 }
 
 /// The line points of all frames as observations with their σ.

@@ -1,0 +1,248 @@
+//! The coarse stage of the global search: every robot pose on the carpet, on a grid, scored by how far
+//! a burst's line points land from the nearest field line.
+//!
+//! The score is a sum of truncated distances read from a coarse map of the field's lines (4 cm cells, a
+//! byte each, padded by the farthest line point's reach so that no lookup needs a bounds check). Grid
+//! positions are whole cells apart, so turning the points once per heading gives each point a fixed cell
+//! offset, and scoring a position is one add and one byte load per point. Only headings in [0, π) are
+//! scored: the field is point-symmetric, so (−x, −y, θ + π) scores what (x, y, θ) does, and callers add
+//! that twin themselves. The grid's local minima are the candidates that the fine fit then refines and
+//! checks ([`super::LineRefiner::search`]).
+
+use nalgebra::Point2;
+
+use super::line_map::LineMap;
+use super::optimise::Observation;
+use crate::geometry::{FieldModel, FieldPose};
+
+/// Cell size of the coarse map, metres.
+const CELL: f64 = 0.04;
+/// Grid step between scored positions, in cells (0.24 m).
+const POSITION_STEP: i32 = 6;
+/// Headings scored over [0, π).
+const HEADINGS: usize = 60;
+/// Distance at which a point stops counting against a pose, metres: the coarse grid's own error (up
+/// to 17 cm of position and 1.5° of heading, ~10 cm at 4 m) plus a margin.
+const TRUNCATION: f64 = 0.3;
+/// Farthest line point the map reaches from a pose on the carpet, metres.
+pub const REACH: f64 = 5.0;
+/// Points scored, at most (evenly spread over the burst's points).
+const MAX_POINTS: usize = 64;
+
+/// A grid pose and its score (lower is better; 255 per point means "far from every line").
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Candidate {
+    /// The pose on the grid.
+    pub pose: FieldPose,
+    /// Mean truncated distance of the scored points from the nearest line, metres.
+    pub mean_distance: f64,
+}
+
+/// The field's lines as a coarse, padded map of truncated distances.
+#[derive(Clone, Debug)]
+pub struct SearchMap {
+    /// Per cell: distance to the nearest line, truncated and scaled to 0..=255.
+    cells: Vec<u8>,
+    columns: usize,
+    /// Field coordinates of cell (0, 0)'s centre.
+    origin: Point2<f64>,
+    /// Cell of the first grid position, and the grid's size in positions.
+    first: (i32, i32),
+    positions: (i32, i32),
+}
+
+impl SearchMap {
+    /// Builds the map for `field` from its distance map `lines` (once; about 0.25 MB).
+    pub fn new(field: &FieldModel, lines: &LineMap) -> Self {
+        let dimensions = field.dimensions();
+        let (half_length, half_width) = (dimensions.carpet_half_length(), dimensions.carpet_half_width());
+        // Grid positions over the carpet, symmetric about the centre spot (so twins score alike).
+        let step = f64::from(POSITION_STEP) * CELL;
+        let positions = ((half_length / step).floor() as i32, (half_width / step).floor() as i32);
+        let pad = ((REACH + CELL) / CELL).ceil() as i32;
+        let half_cells = (positions.0 * POSITION_STEP + pad, positions.1 * POSITION_STEP + pad);
+        let (columns, rows) = (2 * half_cells.0 + 1, 2 * half_cells.1 + 1);
+        let origin = Point2::new(-f64::from(half_cells.0) * CELL, -f64::from(half_cells.1) * CELL);
+        let mut cells = Vec::with_capacity((columns * rows) as usize);
+        for row in 0..rows {
+            for column in 0..columns {
+                let centre = origin + nalgebra::Vector2::new(f64::from(column), f64::from(row)) * CELL;
+                let distance = lines.residual(centre).0.min(TRUNCATION);
+                cells.push((distance / TRUNCATION * 255.0).round() as u8);
+            }
+        }
+        Self {
+            cells,
+            columns: columns as usize,
+            origin,
+            first: (half_cells.0 - positions.0 * POSITION_STEP, half_cells.1 - positions.1 * POSITION_STEP),
+            positions: (2 * positions.0 + 1, 2 * positions.1 + 1),
+        }
+    }
+
+    /// The grid's local minima over positions and headings in [0, π), best first, at most `count`.
+    /// `observations` are robot-frame ground points (farther than [`REACH`] are left out).
+    pub fn candidates(&self, observations: &[Observation], count: usize) -> Vec<Candidate> {
+        let points: Vec<Point2<f64>> = spread(observations);
+        if points.is_empty() {
+            return Vec::new();
+        }
+        let (width, height) = (self.positions.0 as usize, self.positions.1 as usize);
+        let layer = width * height;
+        let mut scores = vec![0u32; HEADINGS * layer];
+        let mut offsets = vec![0isize; points.len()];
+        for (heading_index, layer_scores) in scores.chunks_exact_mut(layer).enumerate() {
+            let (sin, cos) = heading(heading_index).sin_cos();
+            for (offset, point) in offsets.iter_mut().zip(&points) {
+                let dx = ((cos * point.x - sin * point.y) / CELL).round() as isize;
+                let dy = ((sin * point.x + cos * point.y) / CELL).round() as isize;
+                *offset = dy * self.columns as isize + dx;
+            }
+            for (row, row_scores) in layer_scores.chunks_exact_mut(width).enumerate() {
+                let cell_y = self.first.1 as usize + row * POSITION_STEP as usize;
+                for (column, score) in row_scores.iter_mut().enumerate() {
+                    let cell_x = self.first.0 as usize + column * POSITION_STEP as usize;
+                    let base = (cell_y * self.columns + cell_x) as isize;
+                    // Every offset stays within the padding, so the index is in the map.
+                    *score =
+                        offsets.iter().map(|offset| u32::from(self.cells[(base + offset) as usize])).sum();
+                }
+            }
+        }
+        let mut minima: Vec<(u32, usize)> = (0..scores.len())
+            .filter(|&index| is_local_minimum(&scores, index, width, height))
+            .map(|index| (scores[index], index))
+            .collect();
+        minima.sort_unstable();
+        minima
+            .into_iter()
+            .take(count)
+            .map(|(score, index)| {
+                let (heading_index, rest) = (index / layer, index % layer);
+                let (row, column) = (rest / width, rest % width);
+                let cell = |first: i32, at: usize| first + at as i32 * POSITION_STEP;
+                let x = self.origin.x + f64::from(cell(self.first.0, column)) * CELL;
+                let y = self.origin.y + f64::from(cell(self.first.1, row)) * CELL;
+                Candidate {
+                    pose: FieldPose::new(x, y, heading(heading_index)).expect("grid poses are finite"),
+                    mean_distance: f64::from(score) / points.len() as f64 / 255.0 * TRUNCATION,
+                }
+            })
+            .collect()
+    }
+}
+
+/// The spacing of the coarse grid: position (metres) and heading (radians).
+pub fn grid_spacing() -> (f64, f64) {
+    (f64::from(POSITION_STEP) * CELL, std::f64::consts::PI / HEADINGS as f64)
+}
+
+fn heading(index: usize) -> f64 {
+    index as f64 * std::f64::consts::PI / HEADINGS as f64
+}
+
+/// At most [`MAX_POINTS`] of the points within reach, evenly spread over their order.
+fn spread(observations: &[Observation]) -> Vec<Point2<f64>> {
+    let within: Vec<Point2<f64>> = observations
+        .iter()
+        .map(|observation| observation.ground)
+        .filter(|ground| ground.coords.norm() <= REACH)
+        .collect();
+    let stride = within.len().div_ceil(MAX_POINTS).max(1);
+    within.into_iter().step_by(stride).collect()
+}
+
+/// Whether no neighbour (over position and heading, the heading not wrapping) scores lower, and no
+/// earlier neighbour scores the same (so a plateau yields one minimum).
+fn is_local_minimum(scores: &[u32], index: usize, width: usize, height: usize) -> bool {
+    let layer = width * height;
+    let (heading, rest) = (index / layer, index % layer);
+    let (row, column) = (rest / width, rest % width);
+    let score = scores[index];
+    let headings = scores.len() / layer;
+    for dh in -1i64..=1 {
+        for dr in -1i64..=1 {
+            for dc in -1i64..=1 {
+                let (h, r, c) = (heading as i64 + dh, row as i64 + dr, column as i64 + dc);
+                if (dh, dr, dc) == (0, 0, 0)
+                    || !(0..headings as i64).contains(&h)
+                    || !(0..height as i64).contains(&r)
+                    || !(0..width as i64).contains(&c)
+                {
+                    continue;
+                }
+                let neighbour = (h as usize) * layer + (r as usize) * width + c as usize;
+                if scores[neighbour] < score || (scores[neighbour] == score && neighbour < index) {
+                    return false;
+                }
+            }
+        }
+    }
+    true
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::Symmetry;
+
+    /// Robot-frame points on the model's lines as seen from `truth` (ahead, within 3.5 m).
+    pub(crate) fn observe(field: &FieldModel, truth: &FieldPose) -> Vec<Observation> {
+        let map = LineMap::new(field);
+        let (sin, cos) = truth.heading().sin_cos();
+        map.primitives()
+            .iter()
+            .flat_map(|primitive| primitive.samples(0.1))
+            .filter_map(|point| {
+                let offset = point - Point2::new(truth.x(), truth.y());
+                let ground = Point2::new(cos * offset.x + sin * offset.y, -sin * offset.x + cos * offset.y);
+                (ground.x > 0.3 && ground.coords.norm() < 3.5 && ground.y.abs() < 0.8 * ground.x)
+                    .then_some(Observation { ground, sigma: 0.02 })
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_truth_or_its_twin_is_among_the_best_candidates() {
+        let field = FieldModel::default();
+        let search = SearchMap::new(&field, &LineMap::new(&field));
+        for truth in [
+            FieldPose::new(-3.3, -1.4, -2.4).unwrap(),
+            FieldPose::new(1.13, 0.4, 0.7).unwrap(),
+            FieldPose::new(-0.5, 2.9, -1.2).unwrap(),
+        ] {
+            let observations = observe(&field, &truth);
+            assert!(observations.len() > 20, "{}", observations.len());
+            let candidates = search.candidates(&observations, 10);
+            let twin = Symmetry::PointReflection.apply(&truth);
+            let (step, turn) = grid_spacing();
+            let found = candidates.iter().any(|candidate| {
+                [truth, twin].iter().any(|pose| {
+                    candidate.pose.distance_to(pose) <= step
+                        && crate::geometry::angle::angle_distance(candidate.pose.heading(), pose.heading())
+                            <= turn
+                })
+            });
+            assert!(found, "{truth:?} not in {candidates:?}");
+        }
+    }
+
+    #[test]
+    fn no_points_no_candidates() {
+        let field = FieldModel::default();
+        let search = SearchMap::new(&field, &LineMap::new(&field));
+        assert!(search.candidates(&[], 10).is_empty());
+        let far = [Observation { ground: Point2::new(9.0, 0.0), sigma: 0.02 }];
+        assert!(search.candidates(&far, 10).is_empty(), "points beyond reach are left out");
+    }
+
+    #[test]
+    fn grid_positions_are_symmetric_about_the_centre_spot() {
+        let field = FieldModel::default();
+        let search = SearchMap::new(&field, &LineMap::new(&field));
+        let first_x = search.origin.x + f64::from(search.first.0) * CELL;
+        let last_x = first_x + f64::from((search.positions.0 - 1) * POSITION_STEP) * CELL;
+        assert!((first_x + last_x).abs() < 1e-9, "{first_x} .. {last_x}");
+        assert!(last_x <= field.dimensions().carpet_half_length());
+    }
+}
