@@ -602,6 +602,9 @@ fn replay(args: ReplayArgs) -> anyhow::Result<()> {
         &mut stdout.lock(),
     )
     .context("writing results")?;
+    // The field is only drawn in the report plots.
+    #[cfg(not(feature = "report"))]
+    drop(field);
     #[cfg(feature = "report")]
     if let Some(directory) = &args.report {
         let written =
