@@ -10,6 +10,7 @@ pub mod eval;
 pub mod frame;
 pub mod fuzzing;
 pub mod geometry;
+pub mod inspect;
 pub mod pipeline;
 pub mod posture;
 pub mod protocol;

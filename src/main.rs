@@ -44,6 +44,9 @@ enum Command {
     /// Relocalise every frame of a recording: one JSON line per frame, and the thesis' metrics
     /// (on stderr, and with --metrics-json as a file) where the recording has true poses.
     Replay(ReplayArgs),
+    /// Show the line percepts of image files or recordings, as a team checks a new hall: one JSON
+    /// line per frame (carpet edge, line points in pixels and on the ground), overlays with --out.
+    Inspect(InspectArgs),
     /// Print the field description relocd uses (TOML, metres); edit a copy for another field.
     Field(FieldArgs),
     /// Run the daemon: relocalise on a penalty return, a fall, a pick-up or a request, and publish the
@@ -284,6 +287,43 @@ struct ReplayArgs {
 }
 
 #[derive(Debug, clap::Args)]
+struct InspectArgs {
+    /// Image files (PNG or JPEG) or recording directories.
+    #[arg(required = true)]
+    paths: Vec<PathBuf>,
+    /// Camera height above the ground, metres [default: the recording's camera, else the config's].
+    #[arg(long)]
+    camera_height: Option<f64>,
+    /// Camera pitch, degrees, positive looks down [default: as --camera-height].
+    #[arg(long, allow_negative_numbers = true)]
+    camera_pitch: Option<f64>,
+    /// Camera roll, degrees [default: as --camera-height].
+    #[arg(long, allow_negative_numbers = true)]
+    camera_roll: Option<f64>,
+    /// The camera pose is unknown: image stage only (carpet and line crossings, no ground-width
+    /// gate, no ground points).
+    #[arg(long, conflicts_with_all = ["camera_height", "camera_pitch", "camera_roll"])]
+    no_camera: bool,
+    /// Horizontal field of view, degrees.
+    #[arg(long, default_value_t = 54.7)]
+    horizontal_fov: f64,
+    /// Vertical field of view, degrees.
+    #[arg(long, default_value_t = 42.5)]
+    vertical_fov: f64,
+    /// TOML config whose [camera] section gives the default camera pose.
+    #[arg(long, short)]
+    config: Option<PathBuf>,
+    /// Field description file (TOML or JSON, see `relocd field`): its line width gates the points and
+    /// its lines are drawn under a recording's true poses; default: SPL 2025.
+    #[arg(long)]
+    field: Option<PathBuf>,
+    /// Write an overlay PNG per frame into this directory: carpet edge (yellow), line points
+    /// (magenta), crossings the ground gate dropped (red), field lines under the true pose (cyan).
+    #[arg(long, value_name = "DIR")]
+    out: Option<PathBuf>,
+}
+
+#[derive(Debug, clap::Args)]
 struct FieldArgs {
     /// Print this field file's description (validated) instead of the default.
     #[arg(long)]
@@ -335,6 +375,7 @@ fn main() -> ExitCode {
                 Command::Render(args) => render(args),
                 Command::Replay(args) => replay(args),
                 Command::Field(args) => field(args),
+                Command::Inspect(args) => inspect(args),
                 Command::Record(args) => record(args),
                 Command::Bench(args) => bench(args),
                 Command::Run(_) => unreachable!("handled above"),
@@ -651,6 +692,45 @@ fn parse_range(text: &str) -> Result<RangeInclusive<f64>, String> {
         return Err(format!("MIN {low} is greater than MAX {high}"));
     }
     Ok(low..=high)
+}
+
+fn inspect(args: InspectArgs) -> anyhow::Result<()> {
+    let config = match &args.config {
+        Some(path) => Config::load(path)?,
+        None => Config::default(),
+    };
+    config.validate()?;
+    let mut camera = config.camera;
+    let overridden =
+        args.camera_height.is_some() || args.camera_pitch.is_some() || args.camera_roll.is_some();
+    camera.height_m = args.camera_height.unwrap_or(camera.height_m);
+    camera.pitch_deg = args.camera_pitch.unwrap_or(camera.pitch_deg);
+    camera.roll_deg = args.camera_roll.unwrap_or(camera.roll_deg);
+    let pose =
+        camera.mounting().context("--camera-height/--camera-pitch/--camera-roll")?.pose_on(None, None)?;
+    let fov = |degrees: f64, flag: &str| {
+        anyhow::ensure!(degrees > 0.0 && degrees < 180.0, "--{flag} {degrees}: expected degrees in (0, 180)");
+        Ok(degrees.to_radians())
+    };
+    let options = relocd::inspect::InspectOptions {
+        intrinsics: CameraIntrinsics {
+            horizontal_fov: fov(args.horizontal_fov, "horizontal-fov")?,
+            vertical_fov: fov(args.vertical_fov, "vertical-fov")?,
+            ..CameraIntrinsics::nao_top()
+        },
+        camera: (!args.no_camera).then_some(pose),
+        override_recorded_camera: overridden || args.no_camera,
+        field: load_field(args.field.as_deref())?,
+        out: args.out,
+    };
+    let mut stdout = std::io::stdout().lock();
+    relocd::inspect::inspect(&args.paths, &options, |inspection| {
+        use std::io::Write;
+        let line = serde_json::to_string(&inspection).expect("an inspection serialises");
+        // A closed stdout (e.g. `| head`) ends the output, not the command with a panic.
+        let _ = writeln!(stdout, "{line}");
+    })?;
+    Ok(())
 }
 
 fn field(args: FieldArgs) -> anyhow::Result<()> {

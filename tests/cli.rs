@@ -403,3 +403,55 @@ fn bench_reports_every_stage_as_json_and_refuses_a_bad_model() {
     assert!(!not_a_model.status.success());
     assert!(stderr(&not_a_model).contains("Cargo.toml"), "{}", stderr(&not_a_model));
 }
+
+#[test]
+fn inspect_prints_the_percepts_of_a_recording_and_draws_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("rec");
+    let output = relocd(&[
+        "render",
+        "--out",
+        out.to_str().unwrap(),
+        "--count",
+        "2",
+        "--seed",
+        "5",
+        "--camera-pitch",
+        "15,20",
+    ]);
+    assert!(output.status.success(), "{}", stderr(&output));
+    let overlays = dir.path().join("overlays");
+    let output = relocd(&["inspect", out.to_str().unwrap(), "--out", overlays.to_str().unwrap()]);
+    assert!(output.status.success(), "{}", stderr(&output));
+    let lines: Vec<serde_json::Value> =
+        stdout(&output).lines().map(|line| serde_json::from_str(line).expect("a JSON line")).collect();
+    assert_eq!(lines.len(), 2);
+    for line in &lines {
+        assert_eq!((line["width"].as_u64(), line["height"].as_u64()), (Some(640), Some(480)));
+        assert!(line["file"].as_str().unwrap().starts_with(out.to_str().unwrap()), "{line}");
+        assert!(line["camera"]["height_m"].as_f64().is_some(), "the recording's camera: {line}");
+        let points = line["line_points"].as_array().unwrap();
+        assert_eq!(points.len(), line["ground_points"].as_array().unwrap().len());
+        assert_eq!(line["carpet_edge"].as_array().unwrap().len(), 80);
+    }
+    assert_eq!(std::fs::read_dir(&overlays).unwrap().count(), 2);
+}
+
+#[test]
+fn inspect_without_a_camera_and_on_bad_input() {
+    let image = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/real-images/00096_RGB.png");
+    let output = relocd(&["inspect", "--no-camera", image.to_str().unwrap()]);
+    assert!(output.status.success(), "{}", stderr(&output));
+    let line: serde_json::Value = serde_json::from_str(stdout(&output).trim()).unwrap();
+    assert!(line["camera"].is_null() && line.get("ground_points").is_none(), "{line}");
+    assert!(line["line_points"].as_array().unwrap().len() >= 20, "{line}");
+
+    let dir = tempfile::tempdir().unwrap();
+    let broken = dir.path().join("broken.png");
+    std::fs::write(&broken, b"\x89PNG truncated").unwrap();
+    let output = relocd(&["inspect", broken.to_str().unwrap()]);
+    assert!(!output.status.success());
+    assert!(stderr(&output).contains("broken.png"), "{}", stderr(&output));
+    let output = relocd(&["inspect", "--no-camera", "--camera-pitch", "5", image.to_str().unwrap()]);
+    assert!(!output.status.success(), "a pose and no pose at once");
+}

@@ -16,7 +16,9 @@ pub mod search;
 use nalgebra::{Point2, Point3, Vector3};
 
 pub use line_map::LineMap;
-pub use percepts::{FramePercepts, LinePoint, PerceptError, detect};
+pub use percepts::{
+    FramePercepts, ImagePercepts, LineCrossing, LinePoint, PerceptError, detect, detect_in_image,
+};
 
 use crate::frame::Frame;
 use crate::geometry::angle::angle_distance;

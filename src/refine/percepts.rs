@@ -5,7 +5,9 @@
 //! vertical and horizontal scan line is walked for green → bright, unsaturated → green transitions.
 //! A run is kept when its width on the ground fits a painted line (a robot's leg or a ball, standing
 //! above the ground, projects far wider), it lies below the field border (the top of the carpet in its
-//! column), and its centre projects onto the ground within range.
+//! column), and its centre projects onto the ground within range. The image stage alone
+//! ([`detect_in_image`]) needs no camera pose: `relocd inspect` shows it for frames whose pose is
+//! unknown.
 
 use nalgebra::Point2;
 use thiserror::Error;
@@ -58,6 +60,61 @@ pub struct LinePoint {
     pub pixel: Point2<f64>,
 }
 
+/// Where a painted line crosses a scan line in the image: the edges of its bright run, pixels.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LineCrossing {
+    /// The run's first edge (its top on a vertical scan line, its left on a horizontal one).
+    pub start: Point2<f64>,
+    /// The run's other edge.
+    pub end: Point2<f64>,
+}
+
+impl LineCrossing {
+    /// The centre of the crossing: the line point in the image.
+    pub fn centre(&self) -> Point2<f64> {
+        Point2::from((self.start.coords + self.end.coords) / 2.0)
+    }
+}
+
+/// What a frame shows before any camera pose is known: its carpet and the line crossings on it.
+#[derive(Clone, Debug)]
+pub struct ImagePercepts {
+    width: u32,
+    height: u32,
+    scan_spacing: usize,
+    /// Share of the sampled pixels that are carpet, in [0, 1].
+    pub carpet_share: f64,
+    /// Top of the carpet (continuous row) at each vertical scan line; the image height where a column
+    /// shows no carpet.
+    carpet_top: Vec<f64>,
+    /// Whether each grid sample (vertical scan line × every `scan_spacing`-th row, column-major) shows
+    /// something that is neither carpet nor line: a robot, a ball, the hall, a deep shadow.
+    hidden: Vec<bool>,
+    /// The bright runs with carpet on both sides found below the carpet's top, vertical scan lines
+    /// first; the ground stage keeps those whose width fits a painted line.
+    pub crossings: Vec<LineCrossing>,
+}
+
+impl ImagePercepts {
+    /// The frame's size, (width, height) in pixels.
+    pub fn dimensions(&self) -> (u32, u32) {
+        (self.width, self.height)
+    }
+
+    /// Pixels between neighbouring scan lines.
+    pub fn scan_spacing(&self) -> usize {
+        self.scan_spacing
+    }
+
+    /// The carpet's top edge: (column centre, top row) at each vertical scan line, the image height
+    /// where the column shows no carpet.
+    pub fn carpet_edge(&self) -> impl Iterator<Item = (f64, f64)> + '_ {
+        let spacing = self.scan_spacing as f64;
+        let centre = move |index: usize| (self.scan_spacing / 2) as f64 + index as f64 * spacing + 0.5;
+        self.carpet_top.iter().enumerate().map(move |(index, &top)| (centre(index), top))
+    }
+}
+
 /// The line points of one frame, with what is needed to tell where lines should have been seen.
 #[derive(Clone, Debug)]
 pub struct FramePercepts {
@@ -67,13 +124,7 @@ pub struct FramePercepts {
     pub carpet_share: f64,
     camera: Camera,
     camera_height: f64,
-    /// Top of the carpet (continuous row) at each vertical scan line; the image height where a column
-    /// shows no carpet.
-    carpet_top: Vec<f64>,
-    /// Whether each grid sample (vertical scan line × every `scan_spacing`-th row, column-major) shows
-    /// something that is neither carpet nor line: a robot, a ball, the hall, a deep shadow.
-    hidden: Vec<bool>,
-    scan_spacing: usize,
+    image: ImagePercepts,
 }
 
 impl FramePercepts {
@@ -89,14 +140,20 @@ impl FramePercepts {
 
     /// Pixels between neighbouring scan lines.
     pub fn scan_spacing(&self) -> usize {
-        self.scan_spacing
+        self.image.scan_spacing
+    }
+
+    /// The image-space percepts the points were taken from.
+    pub fn image(&self) -> &ImagePercepts {
+        &self.image
     }
 
     /// Whether a line at `pixel` would have been searched for: inside the image, away from its edges,
     /// on the carpet (below the field border of its column) and not hidden by anything standing on it.
     pub fn searched(&self, pixel: &Point2<f64>) -> bool {
         let intrinsics = self.camera.intrinsics();
-        let margin = self.scan_spacing as f64;
+        let image = &self.image;
+        let margin = image.scan_spacing as f64;
         if !(pixel.x >= margin
             && pixel.x < intrinsics.width as f64 - margin
             && pixel.y >= margin
@@ -104,12 +161,14 @@ impl FramePercepts {
         {
             return false;
         }
-        let column = (pixel.x / self.scan_spacing as f64 - 0.5).max(0.0);
-        let left = (column.floor() as usize).min(self.carpet_top.len() - 1);
-        let right = (left + 1).min(self.carpet_top.len() - 1);
-        pixel.y > self.carpet_top[left].max(self.carpet_top[right]) + margin && !self.hidden_at(pixel)
+        let column = (pixel.x / image.scan_spacing as f64 - 0.5).max(0.0);
+        let left = (column.floor() as usize).min(image.carpet_top.len() - 1);
+        let right = (left + 1).min(image.carpet_top.len() - 1);
+        pixel.y > image.carpet_top[left].max(image.carpet_top[right]) + margin && !image.hidden_at(pixel)
     }
+}
 
+impl ImagePercepts {
     /// Whether the grid sample nearest to `pixel` shows neither carpet nor line.
     fn hidden_at(&self, pixel: &Point2<f64>) -> bool {
         let rows = self.hidden.len() / self.carpet_top.len();
@@ -183,7 +242,8 @@ impl Pixels<'_> {
 }
 
 /// Finds the field-line points of `frame`, taken by a camera with `intrinsics` (any resolution: the
-/// field of view is what counts) at `camera_pose` on the robot.
+/// field of view is what counts) at `camera_pose` on the robot: the image stage
+/// ([`detect_in_image`]), then the crossings whose width on the ground fits a painted line.
 pub fn detect(
     frame: &Frame,
     intrinsics: &CameraIntrinsics,
@@ -191,55 +251,72 @@ pub fn detect(
     line_width: f64,
 ) -> Result<FramePercepts, PerceptError> {
     let (width, height) = frame.dimensions();
-    if width == 0 || height == 0 {
-        return Err(PerceptError::EmptyFrame { width, height });
-    }
     let fov_ok = |angle: f64| angle.is_finite() && angle > 0.0 && angle < std::f64::consts::PI;
-    if !fov_ok(intrinsics.horizontal_fov) || !fov_ok(intrinsics.vertical_fov) {
+    if width > 0 && height > 0 && (!fov_ok(intrinsics.horizontal_fov) || !fov_ok(intrinsics.vertical_fov)) {
         return Err(PerceptError::BadFieldOfView {
             horizontal: intrinsics.horizontal_fov.to_degrees(),
             vertical: intrinsics.vertical_fov.to_degrees(),
         });
     }
+    let image = detect_in_image(frame)?;
     let origin = FieldPose::new(0.0, 0.0, 0.0).expect("the origin is finite");
     let camera = Camera::new(intrinsics.with_resolution(width, height), &origin, camera_pose);
+    let mut points: Vec<LinePoint> =
+        image.crossings.iter().filter_map(|crossing| line_point(&camera, crossing, line_width)).collect();
+    if points.len() > MAX_POINTS {
+        let stride = points.len() as f64 / MAX_POINTS as f64;
+        points = (0..MAX_POINTS).map(|i| points[(i as f64 * stride) as usize]).collect();
+    }
+    Ok(FramePercepts {
+        points,
+        carpet_share: image.carpet_share,
+        camera,
+        camera_height: camera_pose.height(),
+        image,
+    })
+}
+
+/// Finds the carpet and the line crossings of `frame` in image space, with no camera pose: the
+/// bright runs with carpet on both sides below the carpet's top, before the ground-width gate.
+pub fn detect_in_image(frame: &Frame) -> Result<ImagePercepts, PerceptError> {
+    let (width, height) = frame.dimensions();
+    if width == 0 || height == 0 {
+        return Err(PerceptError::EmptyFrame { width, height });
+    }
     let pixels = Pixels { frame, width: width as usize };
     let scan_spacing = (width / SCAN_LINES_PER_WIDTH).max(1) as usize;
-    let (palette, carpet_share) = match learn_palette(&pixels, width as usize, height as usize) {
-        Some(found) => found,
-        None => {
-            return Ok(FramePercepts {
-                points: Vec::new(),
-                carpet_share: 0.0,
-                camera,
-                camera_height: camera_pose.height(),
-                carpet_top: vec![height as f64],
-                hidden: Vec::new(),
-                scan_spacing,
-            });
-        }
+    let mut image = ImagePercepts {
+        width,
+        height,
+        scan_spacing,
+        carpet_share: 0.0,
+        carpet_top: vec![height as f64],
+        hidden: Vec::new(),
+        crossings: Vec::new(),
     };
+    let Some((palette, carpet_share)) = learn_palette(&pixels, width as usize, height as usize) else {
+        return Ok(image);
+    };
+    image.carpet_share = carpet_share;
     let (width, height) = (width as usize, height as usize);
     let columns: Vec<usize> = (scan_spacing / 2..width).step_by(scan_spacing).collect();
     let rows: Vec<usize> = (scan_spacing / 2..height).step_by(scan_spacing).collect();
-    let mut points = Vec::new();
-    let mut carpet_top = Vec::with_capacity(columns.len());
-    let mut hidden = Vec::with_capacity(columns.len() * rows.len());
+    image.carpet_top = Vec::with_capacity(columns.len());
+    image.hidden = Vec::with_capacity(columns.len() * rows.len());
     let mut classes = Vec::with_capacity(width.max(height));
-    let accept = |start: Point2<f64>, end: Point2<f64>, points: &mut Vec<LinePoint>, top: f64| {
-        if let Some(point) = line_point(&camera, start, end, top, line_width) {
-            points.push(point);
-        }
-    };
     for &column in &columns {
         classes.clear();
         classes.extend((0..height).map(|row| palette.classify(pixels.yuv(column, row))));
         let top = carpet_start(&classes).map_or(height as f64, |row| row as f64);
-        carpet_top.push(top);
-        hidden.extend(rows.iter().map(|&row| classes[row] == Class::Other));
+        image.carpet_top.push(top);
+        image.hidden.extend(rows.iter().map(|&row| classes[row] == Class::Other));
         let u = column as f64 + 0.5;
         for (start, end) in line_runs(&classes) {
-            accept(Point2::new(u, start as f64), Point2::new(u, end as f64), &mut points, top);
+            let crossing =
+                LineCrossing { start: Point2::new(u, start as f64), end: Point2::new(u, end as f64) };
+            if crossing.centre().y > top {
+                image.crossings.push(crossing);
+            }
         }
     }
     for &row in &rows {
@@ -248,25 +325,17 @@ pub fn detect(
         let v = row as f64 + 0.5;
         for (start, end) in line_runs(&classes) {
             let middle = (start + end) as f64 / 2.0;
-            let index = ((middle / scan_spacing as f64) as usize).min(carpet_top.len() - 1);
-            let next = (index + 1).min(carpet_top.len() - 1);
-            let top = carpet_top[index].max(carpet_top[next]);
-            accept(Point2::new(start as f64, v), Point2::new(end as f64, v), &mut points, top);
+            let index = ((middle / scan_spacing as f64) as usize).min(image.carpet_top.len() - 1);
+            let next = (index + 1).min(image.carpet_top.len() - 1);
+            let top = image.carpet_top[index].max(image.carpet_top[next]);
+            let crossing =
+                LineCrossing { start: Point2::new(start as f64, v), end: Point2::new(end as f64, v) };
+            if crossing.centre().y > top {
+                image.crossings.push(crossing);
+            }
         }
     }
-    if points.len() > MAX_POINTS {
-        let stride = points.len() as f64 / MAX_POINTS as f64;
-        points = (0..MAX_POINTS).map(|i| points[(i as f64 * stride) as usize]).collect();
-    }
-    Ok(FramePercepts {
-        points,
-        carpet_share,
-        camera,
-        camera_height: camera_pose.height(),
-        carpet_top,
-        hidden,
-        scan_spacing,
-    })
+    Ok(image)
 }
 
 /// Learns the carpet's chroma cluster and the line white from a sparse grid of the frame's pixels;
@@ -372,19 +441,9 @@ fn line_runs(classes: &[Class]) -> Vec<(usize, usize)> {
     runs
 }
 
-/// The line point for a bright run between the pixel edges `start` and `end`, if its ground width fits
-/// a painted line and it lies on the carpet below `carpet_top`.
-fn line_point(
-    camera: &Camera,
-    start: Point2<f64>,
-    end: Point2<f64>,
-    carpet_top: f64,
-    line_width: f64,
-) -> Option<LinePoint> {
-    let centre = Point2::from((start.coords + end.coords) / 2.0);
-    if centre.y <= carpet_top {
-        return None;
-    }
+/// The line point of a crossing, if its width on the ground fits a painted line of `line_width`.
+fn line_point(camera: &Camera, crossing: &LineCrossing, line_width: f64) -> Option<LinePoint> {
+    let (start, end, centre) = (crossing.start, crossing.end, crossing.centre());
     let (from, to, ground) = (
         camera.ground_point(start.x, start.y)?,
         camera.ground_point(end.x, end.y)?,

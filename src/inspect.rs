@@ -1,0 +1,292 @@
+//! `relocd inspect`: the line percepts of image files or of a recording, as one JSON line per frame
+//! and, on request, overlay pictures. What a team runs first in a new hall.
+//!
+//! Each frame is searched as line refinement searches it ([`crate::refine::detect`]): the carpet's top
+//! edge, the line crossings in the image, and the line points that survive the ground-width gate under
+//! the frame's camera pose. With no pose at all (`camera: None`) only the image stage runs.
+
+use std::fs;
+use std::path::{Path, PathBuf};
+
+use image::{Rgb, RgbImage};
+use nalgebra::{Point2, Point3};
+use serde::Serialize;
+use thiserror::Error;
+
+use crate::frame::Frame;
+use crate::geometry::{Camera, CameraIntrinsics, CameraPose, FieldModel, FieldPose};
+use crate::recording::{INDEX_FILE, Recording, RecordingError};
+use crate::refine::{ImagePercepts, LineMap, PerceptError, detect, detect_in_image};
+
+/// Spacing of the field-line samples drawn under the true pose, metres.
+const FIELD_SAMPLE_SPACING: f64 = 0.02;
+
+/// Why a path could not be inspected.
+#[derive(Debug, Error)]
+pub enum InspectError {
+    /// An image file could not be read or decoded.
+    #[error("{path}: {reason}")]
+    Image {
+        /// The file.
+        path: PathBuf,
+        /// What went wrong.
+        reason: String,
+    },
+    /// A recording could not be read.
+    #[error(transparent)]
+    Recording(#[from] RecordingError),
+    /// A frame could not be searched.
+    #[error("{path}: {source}")]
+    Percepts {
+        /// The frame.
+        path: PathBuf,
+        /// Why.
+        source: PerceptError,
+    },
+    /// An overlay could not be written.
+    #[error("writing overlay {path}: {reason}")]
+    Overlay {
+        /// The overlay file.
+        path: PathBuf,
+        /// What went wrong.
+        reason: String,
+    },
+}
+
+/// How to inspect.
+#[derive(Clone, Debug)]
+pub struct InspectOptions {
+    /// The camera's field of view (its resolution is each frame's own).
+    pub intrinsics: CameraIntrinsics,
+    /// The camera pose for frames that do not carry one; `None`: image stage only.
+    pub camera: Option<CameraPose>,
+    /// Use `camera` even where a recording's frame carries its own pose.
+    pub override_recorded_camera: bool,
+    /// The field whose painted line width gates the points and whose lines are drawn under true poses.
+    pub field: FieldModel,
+    /// Write an overlay PNG per frame into this directory.
+    pub out: Option<PathBuf>,
+}
+
+/// A camera pose as printed.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct CameraReport {
+    /// Height above the ground, metres.
+    pub height_m: f64,
+    /// Pitch, degrees (positive looks down).
+    pub pitch_deg: f64,
+    /// Roll, degrees.
+    pub roll_deg: f64,
+}
+
+/// One frame's percepts, one JSON line of `relocd inspect`.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Inspection {
+    /// The frame's file, as given (for a recording: the directory joined with its record's file).
+    pub file: String,
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// The camera pose the ground stage used; `null`: image stage only.
+    pub camera: Option<CameraReport>,
+    /// Share of the sampled pixels that are carpet.
+    pub carpet_share: f64,
+    /// The carpet's top edge, `[u, v]` at each vertical scan line (v = height: no carpet there).
+    pub carpet_edge: Vec<[f64; 2]>,
+    /// Line crossings found in the image (before the ground-width gate).
+    pub crossings: usize,
+    /// The line points, `[u, v]` pixel centres of the crossings kept (all crossings without a camera).
+    pub line_points: Vec<[f64; 2]>,
+    /// The same points on the ground in the robot frame, `[x, y]` metres (x forward, y left); absent
+    /// without a camera.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ground_points: Option<Vec<[f64; 2]>>,
+}
+
+/// Inspects every path (image files or recording directories, in order), handing each frame's
+/// result to `emit` as soon as it is ready.
+pub fn inspect(
+    paths: &[PathBuf],
+    options: &InspectOptions,
+    mut emit: impl FnMut(Inspection),
+) -> Result<(), InspectError> {
+    if let Some(out) = &options.out {
+        fs::create_dir_all(out)
+            .map_err(|error| InspectError::Overlay { path: out.clone(), reason: error.to_string() })?;
+    }
+    for path in paths {
+        if path.join(INDEX_FILE).is_file() {
+            let recording = Recording::open(path)?;
+            for record in recording.records() {
+                let frame = recording.load_frame(record)?;
+                let camera = match (options.override_recorded_camera, record.camera) {
+                    (false, Some(recorded)) => Some(recorded),
+                    _ => options.camera,
+                };
+                let truth = record.pose.zip(camera);
+                let file = path.join(&record.file);
+                emit(inspect_frame(&file, &frame, camera, truth, options)?);
+            }
+        } else {
+            let image = image::open(path)
+                .map_err(|error| InspectError::Image { path: path.clone(), reason: error.to_string() })?;
+            let frame = Frame::Rgb(image.into_rgb8());
+            emit(inspect_frame(path, &frame, options.camera, None, options)?);
+        }
+    }
+    Ok(())
+}
+
+/// One frame: its percepts, and its overlay where asked for.
+fn inspect_frame(
+    file: &Path,
+    frame: &Frame,
+    camera: Option<CameraPose>,
+    truth: Option<(FieldPose, CameraPose)>,
+    options: &InspectOptions,
+) -> Result<Inspection, InspectError> {
+    let failed = |source| InspectError::Percepts { path: file.to_path_buf(), source };
+    let (width, height) = frame.dimensions();
+    let line_width = options.field.dimensions().line_width;
+    let (image, points, ground) = match camera {
+        Some(pose) => {
+            let percepts = detect(frame, &options.intrinsics, &pose, line_width).map_err(failed)?;
+            let pixels: Vec<Point2<f64>> = percepts.points.iter().map(|point| point.pixel).collect();
+            let ground: Vec<[f64; 2]> =
+                percepts.points.iter().map(|point| [point.ground.x, point.ground.y]).collect();
+            (percepts.image().clone(), pixels, Some(ground))
+        }
+        None => {
+            let image = detect_in_image(frame).map_err(failed)?;
+            let pixels = image.crossings.iter().map(|crossing| crossing.centre()).collect();
+            (image, pixels, None)
+        }
+    };
+    if let Some(out) = &options.out {
+        let name =
+            file.file_name().map_or_else(|| "frame".into(), |name| name.to_string_lossy().into_owned());
+        let path = out.join(format!("{name}.inspect.png"));
+        let overlay = draw_overlay(frame, &image, &points, truth, options);
+        overlay.save(&path).map_err(|error| InspectError::Overlay { path, reason: error.to_string() })?;
+    }
+    let round = |value: f64| (value * 100.0).round() / 100.0;
+    Ok(Inspection {
+        file: file.display().to_string(),
+        width,
+        height,
+        camera: camera.map(|pose| CameraReport {
+            height_m: pose.height(),
+            pitch_deg: round(pose.pitch().to_degrees()),
+            roll_deg: round(pose.roll().to_degrees()),
+        }),
+        carpet_share: round(image.carpet_share),
+        carpet_edge: image.carpet_edge().map(|(u, v)| [round(u), round(v)]).collect(),
+        crossings: image.crossings.len(),
+        line_points: points.iter().map(|point| [round(point.x), round(point.y)]).collect(),
+        ground_points: ground.map(|ground| {
+            ground.iter().map(|[x, y]| [round(*x * 10.0) / 10.0, round(*y * 10.0) / 10.0]).collect()
+        }),
+    })
+}
+
+/// The frame with its percepts drawn on it: the carpet's top edge (yellow), crossings the ground
+/// gate dropped (red), line points (magenta crosses), and the field lines under the true pose (cyan).
+fn draw_overlay(
+    frame: &Frame,
+    image: &ImagePercepts,
+    points: &[Point2<f64>],
+    truth: Option<(FieldPose, CameraPose)>,
+    options: &InspectOptions,
+) -> RgbImage {
+    let mut canvas = frame.to_rgb();
+    let (width, height) = canvas.dimensions();
+    let put = |canvas: &mut RgbImage, x: f64, y: f64, colour: [u8; 3]| {
+        if x >= 0.0 && y >= 0.0 && (x as u32) < width && (y as u32) < height {
+            canvas.put_pixel(x as u32, y as u32, Rgb(colour));
+        }
+    };
+    if let Some((pose, camera_pose)) = truth {
+        let camera = Camera::new(options.intrinsics.with_resolution(width, height), &pose, &camera_pose);
+        for primitive in LineMap::new(&options.field).primitives() {
+            for sample in primitive.samples(FIELD_SAMPLE_SPACING) {
+                if let Some(pixel) = camera.project(&Point3::new(sample.x, sample.y, 0.0)) {
+                    put(&mut canvas, pixel.x, pixel.y, [0, 230, 255]);
+                }
+            }
+        }
+    }
+    let edge: Vec<(f64, f64)> = image.carpet_edge().collect();
+    for pair in edge.windows(2) {
+        let ((u0, v0), (u1, v1)) = (pair[0], pair[1]);
+        let steps = (u1 - u0).abs().max((v1 - v0).abs()).ceil().max(1.0) as usize;
+        for step in 0..=steps {
+            let t = step as f64 / steps as f64;
+            put(&mut canvas, u0 + t * (u1 - u0), v0 + t * (v1 - v0), [255, 230, 0]);
+        }
+    }
+    for crossing in &image.crossings {
+        let centre = crossing.centre();
+        if !points.iter().any(|point| (point - centre).norm() < 1e-9) {
+            put(&mut canvas, centre.x, centre.y, [255, 0, 0]);
+            put(&mut canvas, centre.x + 1.0, centre.y, [255, 0, 0]);
+        }
+    }
+    for point in points {
+        for d in -3..=3 {
+            let d = f64::from(d);
+            put(&mut canvas, point.x + d, point.y, [255, 0, 255]);
+            put(&mut canvas, point.x, point.y + d, [255, 0, 255]);
+        }
+    }
+    canvas
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn options(camera: Option<CameraPose>, out: Option<PathBuf>) -> InspectOptions {
+        InspectOptions {
+            intrinsics: CameraIntrinsics::nao_top(),
+            camera,
+            override_recorded_camera: false,
+            field: FieldModel::new(crate::geometry::FieldDimensions::spl_2025()),
+            out,
+        }
+    }
+
+    #[test]
+    fn a_missing_or_broken_image_is_named() {
+        let directory = tempfile::tempdir().unwrap();
+        let broken = directory.path().join("broken.png");
+        fs::write(&broken, b"not a png").unwrap();
+        for path in [directory.path().join("missing.png"), broken] {
+            let error = inspect(std::slice::from_ref(&path), &options(None, None), |_| {}).unwrap_err();
+            assert!(error.to_string().contains(&path.display().to_string()), "{error}");
+        }
+    }
+
+    #[test]
+    fn an_image_gives_one_line_and_an_overlay() {
+        let directory = tempfile::tempdir().unwrap();
+        let path = directory.path().join("carpet.png");
+        RgbImage::from_fn(64, 48, |_, y| {
+            Rgb(if (30..33).contains(&y) { [230, 230, 230] } else { [60, 130, 50] })
+        })
+        .save(&path)
+        .unwrap();
+        let out = directory.path().join("overlays");
+        let mut lines = Vec::new();
+        let camera = CameraPose::new(0.5, 0.3, 0.0, 0.0).unwrap();
+        inspect(std::slice::from_ref(&path), &options(Some(camera), Some(out.clone())), |line| {
+            lines.push(line)
+        })
+        .unwrap();
+        assert_eq!(lines.len(), 1);
+        assert_eq!((lines[0].width, lines[0].height), (64, 48));
+        assert_eq!(lines[0].file, path.display().to_string());
+        assert!(lines[0].carpet_edge.iter().all(|[_, v]| *v == 0.0), "{:?}", lines[0].carpet_edge);
+        assert!(out.join("carpet.png.inspect.png").is_file());
+    }
+}
