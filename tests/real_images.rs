@@ -4,7 +4,7 @@
 //!
 //! `cargo test --test real_images -- --ignored --nocapture` prints the table BENCHMARKS.md quotes and
 //! checks issue 18's targets (pooled precision ≥ 95%, ≥ 20 points on every image whose mask is ≥ 2%
-//! line, ≤ 2 points on an image without lines). Today's detector does not meet them, so the check is
+//! line, ≤ 2 points on an image without lines). The detector does not meet them yet, so the check is
 //! ignored by `cargo test` until it does; the scorer's own tests below always run.
 
 use std::path::{Path, PathBuf};

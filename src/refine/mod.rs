@@ -16,6 +16,7 @@ pub mod search;
 use nalgebra::{Point2, Point3, Vector3};
 
 pub use line_map::LineMap;
+use line_map::Primitive;
 pub use percepts::{
     FramePercepts, ImagePercepts, LineCrossing, LinePoint, PerceptError, detect, detect_in_image,
 };
@@ -38,6 +39,9 @@ const MAX_POINT_DISTANCE: f64 = 5.0;
 const EXPECTED_RANGE: (f64, f64) = (0.3, 3.0);
 /// Spacing of the model-line samples checked for being seen, metres.
 const EXPECTED_SPACING: f64 = 0.1;
+/// Shortest painted segment whose absence counts against a pose, metres: a penalty mark's arms are
+/// shorter and the percepts drop a mark as they drop a ball's patch (a blob that does not continue).
+const MIN_EXPECTED_SEGMENT: f64 = 0.3;
 /// Fewest expected samples for the unseen share to count.
 const MIN_EXPECTED: usize = 8;
 /// A point within this many σ of a line is an inlier (and always within 5 cm).
@@ -143,8 +147,12 @@ impl LineRefiner {
     /// Builds the distance map of `field` (once; about 0.6 MB).
     pub fn new(field: &FieldModel) -> Self {
         let map = LineMap::new(field);
-        let line_samples =
-            map.primitives().iter().flat_map(|primitive| primitive.samples(EXPECTED_SPACING)).collect();
+        let line_samples = map
+            .primitives()
+            .iter()
+            .filter(|primitive| expected_to_be_seen(primitive))
+            .flat_map(|primitive| primitive.samples(EXPECTED_SPACING))
+            .collect();
         let search = SearchMap::new(field, &map);
         Self { map, search, line_width: field.dimensions().line_width, line_samples }
     }
@@ -309,6 +317,14 @@ impl LineRefiner {
             }
         }
         (expected >= MIN_EXPECTED).then(|| unseen as f64 / expected as f64)
+    }
+}
+
+/// Whether a line must be seen where the camera looks: every line and circle, not a mark's arms.
+fn expected_to_be_seen(primitive: &Primitive) -> bool {
+    match primitive {
+        Primitive::Segment { start, end } => (end - start).norm() >= MIN_EXPECTED_SEGMENT,
+        Primitive::Circle { .. } => true,
     }
 }
 

@@ -1,0 +1,565 @@
+//! Line percepts: white field-line points found in a camera frame and projected onto the ground.
+//!
+//! The way SPL teams do it, on sparse scan lines (each the mean of three neighbouring pixel lines, so
+//! carpet texture and chroma noise average out), in two stages:
+//! - In the image, with no camera pose ([`detect_in_image`]): the carpet is told by the hue and
+//!   saturation learnt from the frame itself, weighted towards its bottom ([`palette`]); the field's
+//!   border in each column is where walking up from the bottom stops paying off (a greenish wall or a
+//!   crowd above the field is not carpet); a line crossing is a short run brighter than the carpet
+//!   right beside it, by a share of that carpet's brightness and by more than its texture, and grey
+//!   ([`scan`]), so sun patches, shadows, backlight and blurred lines with the carpet's tint are
+//!   judged locally. A crossing must continue on the neighbouring parallel scan lines (on both sides,
+//!   or twice on one where a line ends): a painted line does, a ball's patch, a foot or a speck does
+//!   not; and it may be no wider than its distance below the border allows.
+//! - On the ground ([`detect`]): a crossing is kept when its width on the ground fits a painted line
+//!   (a robot's leg or a ball, standing above the ground, projects far wider) under the camera pose or
+//!   a pose a few degrees of pitch away (what a real robot's joint sensors may be off by), and its
+//!   centre projects onto the ground.
+
+mod palette;
+mod scan;
+
+use nalgebra::Point2;
+use thiserror::Error;
+
+use crate::frame::{Frame, rgb_to_yuv};
+use crate::geometry::{Camera, CameraIntrinsics, CameraPose, FieldPose};
+use palette::{Palette, Yuv};
+use scan::Crossing;
+
+/// Scan lines per image width (and the same spacing vertically).
+const SCAN_LINES_PER_WIDTH: u32 = 80;
+/// Widest line crossing in the image, as a share of its width (a line at the robot's feet).
+const MAX_CROSSING_SHARE: f64 = 0.2;
+/// Pixels of line width allowed per pixel below the carpet's top edge (see
+/// [`perspective_width_limit`]): five times what a 5 cm line seen from 0.5 m, horizon at the border,
+/// spans across.
+const PERSPECTIVE_WIDTH_SLOPE: f64 = 0.5;
+/// Line width always allowed, pixels (a thin line right at the border).
+const MIN_WIDTH_LIMIT: f64 = 4.0;
+/// Least offset, in pixels, at which a crossing must continue beside its scan line.
+const MIN_CONTINUATION_OFFSET: usize = 3;
+/// Multiples of its width a crossing must continue along one side where the other side ends.
+const ONE_SIDED_REACH: usize = 3;
+/// Pitch error of the camera pose the ground-width gate tolerates, radians.
+const PITCH_TOLERANCE: f64 = 3.0 * std::f64::consts::PI / 180.0;
+/// A line's width on the ground may lie between these multiples of the painted width.
+const GROUND_WIDTH_RANGE: (f64, f64) = (0.4, 3.0);
+/// Weight of each carpet pixel in the running carpet brightness along a scan line.
+const RUNNING_WEIGHT: f32 = 0.03125;
+/// Line points kept per frame at most (evenly thinned beyond).
+const MAX_POINTS: usize = 400;
+
+/// Why a frame could not be searched for lines.
+#[derive(Debug, Error, PartialEq)]
+pub enum PerceptError {
+    /// The frame has no pixels.
+    #[error("frame of {width}x{height} has no pixels to search for lines")]
+    EmptyFrame {
+        /// Its width.
+        width: u32,
+        /// Its height.
+        height: u32,
+    },
+    /// The camera's field of view cannot project pixels.
+    #[error("camera field of view {horizontal}° × {vertical}° is not a usable pinhole (0° to 180° each)")]
+    BadFieldOfView {
+        /// Horizontal, degrees.
+        horizontal: f64,
+        /// Vertical, degrees.
+        vertical: f64,
+    },
+}
+
+/// Where a painted line crosses a scan line in the image: the edges of its bright core, pixels.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LineCrossing {
+    /// The core's first edge (its top on a vertical scan line, its left on a horizontal one).
+    pub start: Point2<f64>,
+    /// The core's other edge.
+    pub end: Point2<f64>,
+}
+
+impl LineCrossing {
+    /// The centre of the crossing: the line point in the image.
+    pub fn centre(&self) -> Point2<f64> {
+        Point2::from((self.start.coords + self.end.coords) / 2.0)
+    }
+}
+
+/// What a frame shows before any camera pose is known: its carpet and the line crossings on it.
+#[derive(Clone, Debug)]
+pub struct ImagePercepts {
+    width: u32,
+    height: u32,
+    scan_spacing: usize,
+    /// Share of the sampled pixels that are carpet, in [0, 1].
+    pub carpet_share: f64,
+    /// Top of the carpet (continuous row) at each vertical scan line; the image height where a column
+    /// shows no carpet.
+    carpet_top: Vec<f64>,
+    /// Whether each grid sample (vertical scan line × every `scan_spacing`-th row, column-major) shows
+    /// something that is neither carpet nor line: a robot, a ball, the hall.
+    hidden: Vec<bool>,
+    /// The line crossings found on the carpet, vertical scan lines first.
+    pub crossings: Vec<LineCrossing>,
+}
+
+impl ImagePercepts {
+    /// The frame's size, (width, height) in pixels.
+    pub fn dimensions(&self) -> (u32, u32) {
+        (self.width, self.height)
+    }
+
+    /// Pixels between neighbouring scan lines.
+    pub fn scan_spacing(&self) -> usize {
+        self.scan_spacing
+    }
+
+    /// The carpet's top edge: (column centre, top row) at each vertical scan line, the image height
+    /// where the column shows no carpet.
+    pub fn carpet_edge(&self) -> impl Iterator<Item = (f64, f64)> + '_ {
+        let spacing = self.scan_spacing as f64;
+        let centre = move |index: usize| (self.scan_spacing / 2) as f64 + index as f64 * spacing + 0.5;
+        self.carpet_top.iter().enumerate().map(move |(index, &top)| (centre(index), top))
+    }
+
+    /// The carpet's top at column `u`: the lower of the two scan lines around it.
+    fn carpet_top_at(&self, u: f64) -> f64 {
+        let column = (u / self.scan_spacing as f64 - 0.5).max(0.0);
+        let left = (column.floor() as usize).min(self.carpet_top.len() - 1);
+        let right = (left + 1).min(self.carpet_top.len() - 1);
+        self.carpet_top[left].max(self.carpet_top[right])
+    }
+
+    /// Whether the grid sample nearest to `pixel` shows neither carpet nor line.
+    fn hidden_at(&self, pixel: &Point2<f64>) -> bool {
+        let rows = self.hidden.len() / self.carpet_top.len();
+        let nearest = |value: f64, count: usize| {
+            ((value / self.scan_spacing as f64 - 0.5).round().max(0.0) as usize).min(count.saturating_sub(1))
+        };
+        let (column, row) = (nearest(pixel.x, self.carpet_top.len()), nearest(pixel.y, rows));
+        self.hidden.get(column * rows + row).copied().unwrap_or(true)
+    }
+}
+
+/// One field-line point.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LinePoint {
+    /// Where it lies on the ground in the robot frame (x forward, y left), metres.
+    pub ground: Point2<f64>,
+    /// Where it was seen in the image, pixels.
+    pub pixel: Point2<f64>,
+}
+
+/// The line points of one frame, with what is needed to tell where lines should have been seen.
+#[derive(Clone, Debug)]
+pub struct FramePercepts {
+    /// The line points found.
+    pub points: Vec<LinePoint>,
+    /// Share of the sampled pixels that are carpet, in [0, 1].
+    pub carpet_share: f64,
+    camera: Camera,
+    camera_height: f64,
+    image: ImagePercepts,
+}
+
+impl FramePercepts {
+    /// The camera of a robot standing at the robot-frame origin: projects robot-frame ground points.
+    pub fn camera(&self) -> &Camera {
+        &self.camera
+    }
+
+    /// Height of the camera above the ground, metres.
+    pub fn camera_height(&self) -> f64 {
+        self.camera_height
+    }
+
+    /// Pixels between neighbouring scan lines.
+    pub fn scan_spacing(&self) -> usize {
+        self.image.scan_spacing
+    }
+
+    /// The image-space percepts the points were taken from.
+    pub fn image(&self) -> &ImagePercepts {
+        &self.image
+    }
+
+    /// Whether a line at `pixel` would have been searched for: inside the image, away from its edges,
+    /// on the carpet (below the field border of its column) and not hidden by anything standing on it.
+    pub fn searched(&self, pixel: &Point2<f64>) -> bool {
+        let (width, height) = self.image.dimensions();
+        let margin = self.image.scan_spacing as f64;
+        if !(pixel.x >= margin
+            && pixel.x < width as f64 - margin
+            && pixel.y >= margin
+            && pixel.y < height as f64 - margin)
+        {
+            return false;
+        }
+        pixel.y > self.image.carpet_top_at(pixel.x) + margin && !self.image.hidden_at(pixel)
+    }
+}
+
+/// Pixel access in YUV for either frame format.
+struct Pixels<'a> {
+    frame: &'a Frame,
+    width: usize,
+}
+
+impl Pixels<'_> {
+    fn yuv(&self, x: usize, y: usize) -> Yuv {
+        match self.frame {
+            Frame::Rgb(image) => {
+                let offset = (y * self.width + x) * 3;
+                let raw = &image.as_raw()[offset..offset + 3];
+                rgb_to_yuv(raw[0], raw[1], raw[2])
+            }
+            Frame::Yuyv(image) => {
+                let pair = (y * self.width + (x & !1)) * 2;
+                let bytes = &image.as_bytes()[pair..pair + 4];
+                let luma = if x & 1 == 0 { bytes[0] } else { bytes[2] };
+                (f32::from(luma), f32::from(bytes[1]), f32::from(bytes[3]))
+            }
+        }
+    }
+
+    /// The mean of three pixels across a scan line at `along` on the scan line at `across`: carpet
+    /// texture and chroma noise average out, a line crossing the scan does not.
+    fn smoothed(&self, axis: Axis, across: usize, along: usize, limit: usize) -> Yuv {
+        let sample = |offset: usize| match axis {
+            Axis::Vertical => self.yuv(offset, along),
+            Axis::Horizontal => self.yuv(along, offset),
+        };
+        let (a, b, c) =
+            (sample(across.saturating_sub(1)), sample(across), sample((across + 1).min(limit - 1)));
+        ((a.0 + b.0 + c.0) / 3.0, (a.1 + b.1 + c.1) / 3.0, (a.2 + b.2 + c.2) / 3.0)
+    }
+}
+
+/// The direction of a family of scan lines.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Axis {
+    /// Columns, walked top to bottom.
+    Vertical,
+    /// Rows, walked left to right.
+    Horizontal,
+}
+
+/// Finds the carpet and the line crossings of `frame` in image space, with no camera pose.
+pub fn detect_in_image(frame: &Frame) -> Result<ImagePercepts, PerceptError> {
+    let (width, height) = frame.dimensions();
+    if width == 0 || height == 0 {
+        return Err(PerceptError::EmptyFrame { width, height });
+    }
+    let scan_spacing = (width / SCAN_LINES_PER_WIDTH).max(1) as usize;
+    let pixels = Pixels { frame, width: width as usize };
+    let (width_px, height_px) = (width as usize, height as usize);
+    let Some((palette, carpet_share)) = Palette::learn(width_px, height_px, |x, y| pixels.yuv(x, y)) else {
+        return Ok(ImagePercepts {
+            width,
+            height,
+            scan_spacing,
+            carpet_share: 0.0,
+            carpet_top: vec![height as f64],
+            hidden: Vec::new(),
+            crossings: Vec::new(),
+        });
+    };
+    let max_width = ((MAX_CROSSING_SHARE * width as f64) as usize).max(1);
+    let columns: Vec<usize> = (scan_spacing / 2..width_px).step_by(scan_spacing).collect();
+    let rows: Vec<usize> = (scan_spacing / 2..height_px).step_by(scan_spacing).collect();
+    let mut image = ImagePercepts {
+        width,
+        height,
+        scan_spacing,
+        carpet_share,
+        carpet_top: Vec::with_capacity(columns.len()),
+        hidden: Vec::with_capacity(columns.len() * rows.len()),
+        crossings: Vec::new(),
+    };
+    let mut line: Vec<Yuv> = Vec::with_capacity(width_px.max(height_px));
+    let mut green: Vec<bool> = Vec::with_capacity(width_px.max(height_px));
+    let mut vertical: Vec<(usize, Crossing)> = Vec::new();
+    let mut tops = Vec::with_capacity(columns.len());
+    for (index, &column) in columns.iter().enumerate() {
+        line.clear();
+        line.extend((0..height_px).map(|row| pixels.smoothed(Axis::Vertical, column, row, width_px)));
+        classify(&line, &palette, &mut green);
+        tops.push(scan::carpet_top(&line, &green, &palette).unwrap_or(height_px));
+        image.hidden.extend(rows.iter().map(|&row| !green[row] && !palette.looks_like_paint(line[row])));
+        vertical.extend(scan::crossings(&line, &green, &palette, max_width).into_iter().map(|c| (index, c)));
+    }
+    // One column's spike (a post, a leg) is not the field's border: the median of three is.
+    image.carpet_top = (0..tops.len())
+        .map(|i| {
+            let mut three = [tops[i.saturating_sub(1)], tops[i], tops[(i + 1).min(tops.len() - 1)]];
+            three.sort_unstable();
+            three[1] as f64
+        })
+        .collect();
+    let mut found: Vec<(Axis, usize, Crossing)> = vertical
+        .into_iter()
+        .filter(|&(index, crossing)| crossing.start as f64 > image.carpet_top[index])
+        .map(|(index, crossing)| (Axis::Vertical, columns[index], crossing))
+        .collect();
+    for &row in &rows {
+        line.clear();
+        line.extend((0..width_px).map(|column| pixels.smoothed(Axis::Horizontal, row, column, height_px)));
+        classify(&line, &palette, &mut green);
+        for crossing in scan::crossings(&line, &green, &palette, max_width) {
+            // The carpet on both sides reaches above the crossing (a wide line along a column cuts
+            // that column's carpet short, not its neighbours').
+            let spacing = scan_spacing as f64;
+            let top = image
+                .carpet_top_at((crossing.start as f64 - spacing).max(0.0))
+                .max(image.carpet_top_at(crossing.end as f64 + spacing));
+            if row as f64 + 0.5 > top {
+                found.push((Axis::Horizontal, row, crossing));
+            }
+        }
+    }
+    found.retain(|&(axis, position, crossing)| {
+        let middle = (crossing.start + crossing.end) as f64 / 2.0;
+        let (column, row) = match axis {
+            Axis::Vertical => (position as f64 + 0.5, middle),
+            Axis::Horizontal => (middle, position as f64 + 0.5),
+        };
+        (crossing.end - crossing.start) as f64 <= perspective_width_limit(row - image.carpet_top_at(column))
+    });
+    image.crossings = found
+        .into_iter()
+        .filter(|&(axis, position, crossing)| {
+            continues(&pixels, &palette, axis, position, crossing, (width_px, height_px))
+        })
+        .map(|(axis, position, crossing)| {
+            let across = position as f64 + 0.5;
+            let (start, end) = (crossing.start as f64, crossing.end as f64);
+            match axis {
+                Axis::Vertical => {
+                    LineCrossing { start: Point2::new(across, start), end: Point2::new(across, end) }
+                }
+                Axis::Horizontal => {
+                    LineCrossing { start: Point2::new(start, across), end: Point2::new(end, across) }
+                }
+            }
+        })
+        .collect();
+    Ok(image)
+}
+
+/// The widest a line crossing may be `below` pixels under the carpet's top edge: a line's width in the
+/// image grows with its distance below the horizon, which lies at or above the field's border, so
+/// a wide bright band just below the border (a sun patch, a board's reflection) is not paint.
+fn perspective_width_limit(below: f64) -> f64 {
+    (PERSPECTIVE_WIDTH_SLOPE * below).max(MIN_WIDTH_LIMIT)
+}
+
+/// Which pixels of a scan line are carpet, into `green`. A pixel of the carpet's hue that is clearly
+/// brighter and greyer than the carpet on both sides of it (a running mean from each end) is a blurred
+/// line with the carpet's tint, not carpet; a lone carpet pixel between two others is chroma noise
+/// inside a line.
+fn classify(line: &[Yuv], palette: &Palette, green: &mut Vec<bool>) {
+    green.clear();
+    green.extend(line.iter().map(|&pixel| palette.is_green(pixel)));
+    let running = |order: &mut dyn Iterator<Item = usize>| {
+        let mut means = vec![f32::NAN; line.len()];
+        let mut mean = f32::NAN;
+        for index in order {
+            means[index] = mean;
+            if green[index] {
+                let luma = line[index].0;
+                mean = if mean.is_nan() { luma } else { mean + RUNNING_WEIGHT * (luma - mean) };
+            }
+        }
+        means
+    };
+    let from_start = running(&mut (0..line.len()));
+    let from_end = running(&mut (0..line.len()).rev());
+    for index in 0..line.len() {
+        let carpet = from_start[index].max(from_end[index]);
+        if green[index]
+            && carpet.is_finite()
+            && scan::is_bright(line[index], scan::threshold(carpet), palette)
+        {
+            green[index] = false;
+        }
+    }
+    for index in 1..green.len().saturating_sub(1) {
+        if green[index] && !green[index - 1] && !green[index + 1] {
+            green[index] = false;
+        }
+    }
+}
+
+/// Whether a crossing at `position` across `axis` has bright pixels on the parallel scan lines its own
+/// width (at least `MIN_CONTINUATION_OFFSET`) away on both sides, or further along one side,
+/// within a window that a straight or curved line at a slant reaches: a painted line continues, a
+/// blob ends.
+fn continues(
+    pixels: &Pixels,
+    palette: &Palette,
+    axis: Axis,
+    position: usize,
+    crossing: Crossing,
+    (width, height): (usize, usize),
+) -> bool {
+    let offset = (crossing.end - crossing.start).max(MIN_CONTINUATION_OFFSET);
+    let (across_limit, along_limit) = match axis {
+        Axis::Vertical => (width, height),
+        Axis::Horizontal => (height, width),
+    };
+    let window = crossing.start.saturating_sub(2 * offset)..(crossing.end + 2 * offset).min(along_limit);
+    let bright_on = |across: usize| {
+        window.clone().any(|along| {
+            scan::is_bright(pixels.smoothed(axis, across, along, across_limit), crossing.threshold, palette)
+        })
+    };
+    // Both sides at once its width; or, where a line ends (a corner, a T, the image's edge), one side
+    // at every multiple of its width up to `ONE_SIDED_REACH` (further than a ball's patch reaches).
+    let side = |distance: usize, towards_start: bool| {
+        let across = if towards_start { position.checked_sub(distance) } else { Some(position + distance) };
+        across.filter(|&across| across < across_limit).is_some_and(bright_on)
+    };
+    let reaches =
+        |towards_start: bool| (2..=ONE_SIDED_REACH).all(|times| side(times * offset, towards_start));
+    let (before, after) = (side(offset, true), side(offset, false));
+    (before && (after || reaches(true))) || (after && reaches(false))
+}
+
+/// Finds the field-line points of `frame`, taken by a camera with `intrinsics` (any resolution: the
+/// field of view is what counts) at `camera_pose` on the robot.
+pub fn detect(
+    frame: &Frame,
+    intrinsics: &CameraIntrinsics,
+    camera_pose: &CameraPose,
+    line_width: f64,
+) -> Result<FramePercepts, PerceptError> {
+    let (width, height) = frame.dimensions();
+    let fov_ok = |angle: f64| angle.is_finite() && angle > 0.0 && angle < std::f64::consts::PI;
+    if width > 0 && height > 0 && (!fov_ok(intrinsics.horizontal_fov) || !fov_ok(intrinsics.vertical_fov)) {
+        return Err(PerceptError::BadFieldOfView {
+            horizontal: intrinsics.horizontal_fov.to_degrees(),
+            vertical: intrinsics.vertical_fov.to_degrees(),
+        });
+    }
+    let image = detect_in_image(frame)?;
+    let origin = FieldPose::new(0.0, 0.0, 0.0).expect("the origin is finite");
+    let intrinsics = intrinsics.with_resolution(width, height);
+    let camera = Camera::new(intrinsics, &origin, camera_pose);
+    // The same camera a little more and a little less pitched, for the width gate.
+    let tilted: Vec<Camera> = [-PITCH_TOLERANCE, PITCH_TOLERANCE]
+        .iter()
+        .filter_map(|delta| {
+            let pose = CameraPose::new(
+                camera_pose.height(),
+                camera_pose.pitch() + delta,
+                camera_pose.roll(),
+                camera_pose.head_yaw(),
+            );
+            pose.ok().map(|pose| Camera::new(intrinsics, &origin, &pose))
+        })
+        .collect();
+    let mut points: Vec<LinePoint> = image
+        .crossings
+        .iter()
+        .filter_map(|crossing| {
+            let ground = camera.ground_point(crossing.centre().x, crossing.centre().y)?;
+            let fits = std::iter::once(&camera)
+                .chain(&tilted)
+                .any(|camera| ground_width_fits(camera, crossing, line_width));
+            fits.then_some(LinePoint { ground, pixel: crossing.centre() })
+        })
+        .collect();
+    if points.len() > MAX_POINTS {
+        let stride = points.len() as f64 / MAX_POINTS as f64;
+        points = (0..MAX_POINTS).map(|i| points[(i as f64 * stride) as usize]).collect();
+    }
+    Ok(FramePercepts {
+        points,
+        carpet_share: image.carpet_share,
+        camera,
+        camera_height: camera_pose.height(),
+        image,
+    })
+}
+
+/// Whether a crossing's width on the ground under `camera` fits a painted line of `line_width`.
+fn ground_width_fits(camera: &Camera, crossing: &LineCrossing, line_width: f64) -> bool {
+    let (Some(from), Some(to)) = (
+        camera.ground_point(crossing.start.x, crossing.start.y),
+        camera.ground_point(crossing.end.x, crossing.end.y),
+    ) else {
+        return false;
+    };
+    let ground_width = (to - from).norm();
+    (GROUND_WIDTH_RANGE.0 * line_width..=GROUND_WIDTH_RANGE.1 * line_width).contains(&ground_width)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use image::{Rgb, RgbImage};
+
+    #[test]
+    fn what_stands_on_the_carpet_hides_the_lines_behind_it() {
+        // Carpet to the top of the image, a grey robot standing in its lower middle.
+        let frame = Frame::Rgb(RgbImage::from_fn(640, 480, |x, y| {
+            let robot = (280..360).contains(&x) && (300..420).contains(&y);
+            Rgb(if robot { [128, 128, 128] } else { [60, 130, 50] })
+        }));
+        let camera = CameraPose::new(0.5, 0.3, 0.0, 0.0).unwrap();
+        let percepts = detect(&frame, &CameraIntrinsics::nao_top(), &camera, 0.05).unwrap();
+        assert!(percepts.points.is_empty());
+        assert!(percepts.searched(&Point2::new(100.0, 360.0)), "open carpet");
+        assert!(!percepts.searched(&Point2::new(320.0, 360.0)), "behind the robot");
+        assert!(!percepts.searched(&Point2::new(320.0, 2.0)), "at the image edge");
+    }
+
+    #[test]
+    fn a_painted_line_continues_and_a_ball_does_not() {
+        // A slanted line on carpet and a white disc (a ball's patch) of about its width elsewhere.
+        let frame = Frame::Rgb(RgbImage::from_fn(640, 480, |x, y| {
+            let (x, y) = (x as f64, y as f64);
+            let line = (y - 200.0 - 0.5 * x).abs() < 6.0;
+            let ball = (x - 500.0).hypot(y - 150.0) < 10.0;
+            Rgb(if line || ball { [230, 235, 230] } else { [60, 130, 50] })
+        }));
+        let image = detect_in_image(&frame).unwrap();
+        assert!(image.crossings.len() > 30, "{} crossings", image.crossings.len());
+        for crossing in &image.crossings {
+            let centre = crossing.centre();
+            assert!((centre.y - 200.0 - 0.5 * centre.x).abs() < 8.0, "{centre:?} is not on the line");
+        }
+    }
+
+    #[test]
+    fn a_blurred_line_with_the_carpets_tint_is_a_line_and_a_sun_patch_is_not() {
+        // Carpet with a broad sunlit band across the top half and, below it, a blurred line whose
+        // pixels keep some of the carpet's green.
+        let frame = Frame::Rgb(RgbImage::from_fn(640, 480, |x, y| {
+            let (x, y) = (x as f64, y as f64);
+            let sun = (60.0..180.0).contains(&(y - 0.2 * x));
+            let distance = (y - 330.0 - 0.3 * x).abs();
+            Rgb(if distance < 4.0 {
+                [150, 195, 140]
+            } else if sun {
+                [110, 235, 95]
+            } else {
+                [60, 130, 50]
+            })
+        }));
+        let image = detect_in_image(&frame).unwrap();
+        assert!(image.crossings.len() > 40, "{} crossings", image.crossings.len());
+        for crossing in &image.crossings {
+            let centre = crossing.centre();
+            assert!((centre.y - 330.0 - 0.3 * centre.x).abs() < 6.0, "{centre:?} is not on the line");
+        }
+    }
+
+    #[test]
+    fn an_empty_frame_is_refused() {
+        let frame = Frame::Rgb(RgbImage::new(0, 0));
+        assert_eq!(detect_in_image(&frame).unwrap_err(), PerceptError::EmptyFrame { width: 0, height: 0 });
+    }
+}
