@@ -159,3 +159,13 @@ fn check_parity(backend: Backend, tolerance: Option<f64>) {
     }
     assert!(checked >= 1, "no parity fixture checked");
 }
+
+#[test]
+fn the_built_in_model_says_which_cameras_it_was_trained_for() {
+    let model = default_model().unwrap();
+    let range = model.contract().camera_range().expect("the v3 contract carries its camera range");
+    assert_eq!(range.height_m, [0.38, 0.55]);
+    assert_eq!(range.pitch_deg_down, [-10.0, 25.0]);
+    let standing = relocd::geometry::CameraPose::STANDING;
+    assert_eq!(range.outside(&standing), None, "a standing Nao is inside");
+}

@@ -21,6 +21,7 @@ use crate::geometry::{CameraIntrinsics, CameraPose, FieldModel, FieldPose, PoseS
 use crate::refine::{
     FramePercepts, Guess, LineCheck, LineEvidence, LineFit, LineRefiner, LineVerdict, same_place_or_twin,
 };
+use crate::relocaliser::contract::CameraRange;
 use crate::relocaliser::{
     FusionError, Model, Prediction, Relocalisation, RelocaliseError, Relocaliser, fuse as fuse_frames,
 };
@@ -92,18 +93,21 @@ pub struct Pipeline {
     refiner: Option<LineRefiner>,
     search: GlobalSearch,
     intrinsics: CameraIntrinsics,
+    /// The camera poses the network was trained for, where its contract says.
+    camera_range: Option<CameraRange>,
 }
 
 impl Pipeline {
     /// The network alone. Line points are projected with the camera intrinsics the model's contract
     /// names (the camera its training frames emulate).
     pub fn new(model: Model) -> Self {
-        let intrinsics = model.contract().camera;
+        let (intrinsics, camera_range) = (model.contract().camera, model.contract().camera_range());
         Self {
             relocaliser: Some(Relocaliser::new(model)),
             refiner: None,
             search: GlobalSearch::default(),
             intrinsics,
+            camera_range,
         }
     }
 
@@ -115,6 +119,7 @@ impl Pipeline {
             refiner: Some(LineRefiner::new(field)),
             search: GlobalSearch::Always,
             intrinsics,
+            camera_range: None,
         }
     }
 
@@ -144,6 +149,7 @@ impl Pipeline {
     /// lines are checked stays).
     pub fn replace_model(&mut self, model: Model) {
         self.intrinsics = model.contract().camera;
+        self.camera_range = model.contract().camera_range();
         self.relocaliser = Some(Relocaliser::new(model));
     }
 
@@ -156,6 +162,7 @@ impl Pipeline {
             percepts: Vec::new(),
             failures: Vec::new(),
             times: StageTimes::default(),
+            camera_warned: false,
         }
     }
 }
@@ -169,6 +176,8 @@ pub struct Burst<'p> {
     percepts: Vec<FramePercepts>,
     failures: Vec<String>,
     times: StageTimes,
+    /// Whether this burst has warned of a camera outside the network's training range.
+    camera_warned: bool,
 }
 
 impl Burst<'_> {
@@ -183,6 +192,14 @@ impl Burst<'_> {
         camera: Option<&CameraPose>,
     ) -> Result<Option<Relocalisation>, RelocaliseError> {
         self.frames += 1;
+        if let (Some(range), Some(camera), false) = (&self.pipeline.camera_range, camera, self.camera_warned)
+            && let Some(outside) = range.outside(camera)
+        {
+            tracing::warn!(
+                "the camera is outside what the network was trained for ({outside}): expect it to be off"
+            );
+            self.camera_warned = true;
+        }
         if let (Some(refiner), Some(camera)) = (&self.pipeline.refiner, camera) {
             let started = Instant::now();
             match refiner.percepts(frame, &self.pipeline.intrinsics, camera) {

@@ -6,7 +6,7 @@ use std::collections::BTreeMap;
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
-use crate::geometry::{CameraIntrinsics, FieldDimensions, Representation};
+use crate::geometry::{CameraIntrinsics, CameraPose, FieldDimensions, Representation};
 
 /// The metadata key holding the contract.
 pub const CONTRACT_KEY: &str = "relocd.contract";
@@ -84,6 +84,43 @@ pub struct ModelContract {
     pub training: serde_json::Value,
 }
 
+/// The camera poses a model's training frames were rendered with (`training.camera_range` in its
+/// contract, written by `models/export.py` from v3 on). A frame from outside it is one the network has
+/// not learnt to read.
+#[derive(Clone, Copy, Debug, PartialEq, Deserialize)]
+pub struct CameraRange {
+    /// Lowest and highest camera height, metres.
+    pub height_m: [f64; 2],
+    /// Least and most pitch, degrees, positive looking down.
+    pub pitch_deg_down: [f64; 2],
+    /// Largest roll either way, degrees.
+    pub max_roll_deg: f64,
+}
+
+impl CameraRange {
+    /// What about `pose` lies outside the range, in words; `None` when it lies within.
+    pub fn outside(&self, pose: &CameraPose) -> Option<String> {
+        let (height, pitch, roll) = (pose.height(), pose.pitch().to_degrees(), pose.roll().to_degrees());
+        let mut reasons = Vec::new();
+        if !(self.height_m[0]..=self.height_m[1]).contains(&height) {
+            reasons.push(format!(
+                "height {height:.2} m not in {:.2}-{:.2} m",
+                self.height_m[0], self.height_m[1]
+            ));
+        }
+        if !(self.pitch_deg_down[0]..=self.pitch_deg_down[1]).contains(&pitch) {
+            reasons.push(format!(
+                "pitch {pitch:.1}° not in {:.1}° to {:.1}° (down)",
+                self.pitch_deg_down[0], self.pitch_deg_down[1]
+            ));
+        }
+        if roll.abs() > self.max_roll_deg {
+            reasons.push(format!("roll {roll:.1}° beyond ±{:.1}°", self.max_roll_deg));
+        }
+        (!reasons.is_empty()).then(|| reasons.join(", "))
+    }
+}
+
 /// The outputs every model has, whatever its representation.
 pub const BASE_OUTPUTS: [&str; 4] = ["position", "heading", "position_sigma", "heading_kappa"];
 /// The output that carries the fold-bit probabilities (absent for `full`).
@@ -96,6 +133,11 @@ impl ModelContract {
             serde_json::from_str(text).map_err(|error| ContractError::Malformed(error.to_string()))?;
         contract.validate()?;
         Ok(contract)
+    }
+
+    /// The camera poses the training frames covered, where the contract says (models from v3 on).
+    pub fn camera_range(&self) -> Option<CameraRange> {
+        serde_json::from_value(self.training.get("camera_range")?.clone()).ok()
     }
 
     /// The output names this contract's representation needs, in the order relocd reads them.
@@ -229,5 +271,28 @@ pub(crate) mod tests {
         assert!(parse(&std).unwrap_err().to_string().contains("input.std"));
 
         assert!(matches!(ModelContract::from_json("{"), Err(ContractError::Malformed(_))));
+    }
+
+    #[test]
+    fn the_training_camera_range_is_read_and_says_what_lies_outside_it() {
+        let mut document = sample_json("half-point");
+        assert_eq!(ModelContract::from_json(&document.to_string()).unwrap().camera_range(), None);
+        document["training"] = serde_json::json!({
+            "camera_range": {"height_m": [0.38, 0.55], "pitch_deg_down": [-10.0, 25.0], "max_roll_deg": 5.0}
+        });
+        let range = ModelContract::from_json(&document.to_string()).unwrap().camera_range().unwrap();
+        let pose = |height: f64, pitch: f64, roll: f64| {
+            CameraPose::new(height, pitch.to_radians(), roll.to_radians(), 0.0).unwrap()
+        };
+        assert_eq!(range.outside(&pose(0.5, 10.0, 2.0)), None);
+        let low_and_up = range.outside(&pose(0.3, -15.0, 0.0)).unwrap();
+        assert!(low_and_up.contains("height 0.30 m") && low_and_up.contains("pitch -15.0°"), "{low_and_up}");
+        assert!(range.outside(&pose(0.5, 0.0, -6.0)).unwrap().contains("roll -6.0°"));
+        document["training"]["camera_range"] = serde_json::json!({"height_m": "tall"});
+        assert_eq!(
+            ModelContract::from_json(&document.to_string()).unwrap().camera_range(),
+            None,
+            "malformed"
+        );
     }
 }
