@@ -46,7 +46,7 @@ const PITCH_TOLERANCE: f64 = 3.0 * std::f64::consts::PI / 180.0;
 /// A line's width on the ground may lie between these multiples of the painted width.
 const GROUND_WIDTH_RANGE: (f64, f64) = (0.4, 3.0);
 /// Weight of each carpet pixel in the running carpet brightness along a scan line.
-const RUNNING_WEIGHT: f32 = 0.03125;
+const RUNNING_WEIGHT: f32 = 1.0 / 32.0;
 /// Line points kept per frame at most (evenly thinned beyond).
 const MAX_POINTS: usize = 400;
 

@@ -22,7 +22,7 @@ const EDGE_GAP: usize = 2;
 /// Least share of a crossing's core pixels that are bright (a ball's black patches are not).
 const MIN_BRIGHT_SHARE: f32 = 0.75;
 /// Least carpet score (carpet pixels less others) of a column that has carpet at all.
-const CARPET_RUN: usize = 4;
+const MIN_CARPET_SCORE: i64 = 4;
 
 /// A line crossing one scan line: its bright core, [start, end) along the scan, and the brightness a
 /// pixel needs to belong to it.
@@ -57,8 +57,8 @@ pub(super) fn crossings(
             continue;
         }
         let (Some(before), Some(after)) = (
-            side_luma(pixels, green, (start.saturating_sub(SIDE_PIXELS)..start).rev()),
-            side_luma(pixels, green, end..(end + SIDE_PIXELS).min(pixels.len())),
+            carpet_beside(pixels, green, (start.saturating_sub(SIDE_PIXELS)..start).rev()),
+            carpet_beside(pixels, green, end..(end + SIDE_PIXELS).min(pixels.len())),
         ) else {
             continue;
         };
@@ -103,7 +103,7 @@ struct Side {
 
 /// The carpet pixels met first along `side` (up to `SIDE_PIXELS` of them, contiguous); `None` when
 /// fewer than `MIN_SIDE_PIXELS` carpet pixels border the run there.
-fn side_luma(pixels: &[Yuv], green: &[bool], side: impl Iterator<Item = usize>) -> Option<Side> {
+fn carpet_beside(pixels: &[Yuv], green: &[bool], side: impl Iterator<Item = usize>) -> Option<Side> {
     let (mut sum, mut steps, mut count, mut last) = (0.0, 0.0, 0usize, None);
     for index in side {
         if !green[index] {
@@ -122,10 +122,11 @@ fn side_luma(pixels: &[Yuv], green: &[bool], side: impl Iterator<Item = usize>) 
 /// The top of the carpet in one image column (`pixels` from top to bottom), as SPL teams find the
 /// field boundary: walking up from the bottom, every carpet pixel scores one and every other pixel
 /// loses one (paint-like pixels neither score nor lose); the carpet ends where the score peaks. A
-/// line, a ball or a robot standing on the carpet costs less than the carpet above it brings back; a wall, a crowd or a greenish hall above the
-/// field does not bring it back. `None` when the column shows no carpet.
+/// line, a ball or a robot standing on the carpet costs less than the carpet above it brings back; a
+/// wall, a crowd or a greenish hall above the field does not bring it back. `None` when the column
+/// shows no carpet.
 pub(super) fn carpet_top(pixels: &[Yuv], green: &[bool], palette: &Palette) -> Option<usize> {
-    let (mut score, mut best, mut top) = (0i64, CARPET_RUN as i64 - 1, None);
+    let (mut score, mut best, mut top) = (0i64, MIN_CARPET_SCORE - 1, None);
     for row in (0..green.len()).rev() {
         score += if green[row] {
             1
