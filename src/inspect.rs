@@ -16,7 +16,8 @@ use thiserror::Error;
 use crate::frame::Frame;
 use crate::geometry::{Camera, CameraIntrinsics, CameraPose, FieldModel, FieldPose};
 use crate::recording::{INDEX_FILE, Recording, RecordingError};
-use crate::refine::{ImagePercepts, LineMap, PerceptError, detect, detect_in_image};
+use crate::refine::line_map::field_primitives;
+use crate::refine::{ImagePercepts, PerceptError, detect, detect_in_image};
 
 /// Spacing of the field-line samples drawn under the true pose, metres.
 const FIELD_SAMPLE_SPACING: f64 = 0.02;
@@ -115,6 +116,11 @@ pub fn inspect(
         fs::create_dir_all(out)
             .map_err(|error| InspectError::Overlay { path: out.clone(), reason: error.to_string() })?;
     }
+    // The field's painted lines as points, drawn under true poses.
+    let field_lines: Vec<Point2<f64>> = field_primitives(&options.field)
+        .iter()
+        .flat_map(|primitive| primitive.samples(FIELD_SAMPLE_SPACING))
+        .collect();
     for path in paths {
         if path.join(INDEX_FILE).is_file() {
             let recording = Recording::open(path)?;
@@ -126,13 +132,13 @@ pub fn inspect(
                 };
                 let truth = record.pose.zip(camera);
                 let file = path.join(&record.file);
-                emit(inspect_frame(&file, &frame, camera, truth, options)?);
+                emit(inspect_frame(&file, &frame, camera, truth, &field_lines, options)?);
             }
         } else {
             let image = image::open(path)
                 .map_err(|error| InspectError::Image { path: path.clone(), reason: error.to_string() })?;
             let frame = Frame::Rgb(image.into_rgb8());
-            emit(inspect_frame(path, &frame, options.camera, None, options)?);
+            emit(inspect_frame(path, &frame, options.camera, None, &field_lines, options)?);
         }
     }
     Ok(())
@@ -144,6 +150,7 @@ fn inspect_frame(
     frame: &Frame,
     camera: Option<CameraPose>,
     truth: Option<(FieldPose, CameraPose)>,
+    field_lines: &[Point2<f64>],
     options: &InspectOptions,
 ) -> Result<Inspection, InspectError> {
     let failed = |source| InspectError::Percepts { path: file.to_path_buf(), source };
@@ -167,10 +174,10 @@ fn inspect_frame(
         let name =
             file.file_name().map_or_else(|| "frame".into(), |name| name.to_string_lossy().into_owned());
         let path = out.join(format!("{name}.inspect.png"));
-        let overlay = draw_overlay(frame, &image, &points, truth, options);
+        let overlay = draw_overlay(frame, &image, &points, truth, field_lines, options);
         overlay.save(&path).map_err(|error| InspectError::Overlay { path, reason: error.to_string() })?;
     }
-    let round = |value: f64| (value * 100.0).round() / 100.0;
+    let round = |value: f64| rounded(value, 2);
     Ok(Inspection {
         file: file.display().to_string(),
         width,
@@ -184,19 +191,25 @@ fn inspect_frame(
         carpet_edge: image.carpet_edge().map(|(u, v)| [round(u), round(v)]).collect(),
         crossings: image.crossings.len(),
         line_points: points.iter().map(|point| [round(point.x), round(point.y)]).collect(),
-        ground_points: ground.map(|ground| {
-            ground.iter().map(|[x, y]| [round(*x * 10.0) / 10.0, round(*y * 10.0) / 10.0]).collect()
-        }),
+        ground_points: ground
+            .map(|ground| ground.iter().map(|[x, y]| [rounded(*x, 3), rounded(*y, 3)]).collect()),
     })
 }
 
+/// `value` rounded to `decimals` decimal places, for printing.
+fn rounded(value: f64, decimals: i32) -> f64 {
+    let factor = 10f64.powi(decimals);
+    (value * factor).round() / factor
+}
+
 /// The frame with its percepts drawn on it: the carpet's top edge (yellow), crossings the ground
-/// gate dropped (red), line points (magenta crosses), and the field lines under the true pose (cyan).
+/// gate dropped (red), line points (magenta crosses), and `field_lines` under the true pose (cyan).
 fn draw_overlay(
     frame: &Frame,
     image: &ImagePercepts,
     points: &[Point2<f64>],
     truth: Option<(FieldPose, CameraPose)>,
+    field_lines: &[Point2<f64>],
     options: &InspectOptions,
 ) -> RgbImage {
     let mut canvas = frame.to_rgb();
@@ -208,11 +221,9 @@ fn draw_overlay(
     };
     if let Some((pose, camera_pose)) = truth {
         let camera = Camera::new(options.intrinsics.with_resolution(width, height), &pose, &camera_pose);
-        for primitive in LineMap::new(&options.field).primitives() {
-            for sample in primitive.samples(FIELD_SAMPLE_SPACING) {
-                if let Some(pixel) = camera.project(&Point3::new(sample.x, sample.y, 0.0)) {
-                    put(&mut canvas, pixel.x, pixel.y, [0, 230, 255]);
-                }
+        for sample in field_lines {
+            if let Some(pixel) = camera.project(&Point3::new(sample.x, sample.y, 0.0)) {
+                put(&mut canvas, pixel.x, pixel.y, [0, 230, 255]);
             }
         }
     }

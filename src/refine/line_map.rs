@@ -100,7 +100,7 @@ pub struct LineMap {
 impl LineMap {
     /// Builds the map for `field`: its lines, its centre circle and the arms of its marks.
     pub fn new(field: &FieldModel) -> Self {
-        let primitives = primitives(field);
+        let primitives = field_primitives(field);
         let dimensions = field.dimensions();
         let half_length = dimensions.carpet_half_length() + MARGIN;
         let half_width = dimensions.carpet_half_width() + MARGIN;
@@ -154,8 +154,9 @@ impl LineMap {
     }
 }
 
-/// Every painted centre line of `field` as primitives: lines, circles, and both arms of every mark.
-fn primitives(field: &FieldModel) -> Vec<Primitive> {
+/// Every painted centre line of `field` as primitives: lines, circles, and both arms of every mark
+/// (what [`LineMap::new`] builds its map of, without building it).
+pub fn field_primitives(field: &FieldModel) -> Vec<Primitive> {
     let segments = field.lines.iter().map(|line| Primitive::Segment { start: line.start, end: line.end });
     let circles =
         field.circles.iter().map(|circle| Primitive::Circle { centre: circle.centre, radius: circle.radius });

@@ -9,7 +9,7 @@
 //!   right beside it, by a share of that carpet's brightness and by more than its texture, and grey
 //!   ([`scan`]), so sun patches, shadows, backlight and blurred lines with the carpet's tint are
 //!   judged locally. A crossing must continue on the neighbouring parallel scan lines (on both sides,
-//!   or twice on one where a line ends): a painted line does, a ball's patch, a foot or a speck does
+//!   or further along one where a line ends): a painted line does, a ball's patch, a foot or a speck does
 //!   not; and it may be no wider than its distance below the border allows.
 //! - On the ground ([`detect`]): a crossing is kept when its width on the ground fits a painted line
 //!   (a robot's leg or a ball, standing above the ground, projects far wider) under the camera pose or
@@ -157,8 +157,6 @@ pub struct LinePoint {
 pub struct FramePercepts {
     /// The line points found.
     pub points: Vec<LinePoint>,
-    /// Share of the sampled pixels that are carpet, in [0, 1].
-    pub carpet_share: f64,
     camera: Camera,
     camera_height: f64,
     image: ImagePercepts,
@@ -475,13 +473,7 @@ pub fn detect(
         let stride = points.len() as f64 / MAX_POINTS as f64;
         points = (0..MAX_POINTS).map(|i| points[(i as f64 * stride) as usize]).collect();
     }
-    Ok(FramePercepts {
-        points,
-        carpet_share: image.carpet_share,
-        camera,
-        camera_height: camera_pose.height(),
-        image,
-    })
+    Ok(FramePercepts { points, camera, camera_height: camera_pose.height(), image })
 }
 
 /// Whether a crossing's width on the ground under `camera` fits a painted line of `line_width`.
