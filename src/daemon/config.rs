@@ -100,8 +100,8 @@ impl Default for Config {
             team: None,
             player: None,
             gamecontroller: GameControllerConfig::default(),
-            sensors: SensorInput::Forwarded(Listen::Unix(PathBuf::from("/tmp/relocd-sensors"))),
-            control: Listen::Unix(PathBuf::from("/tmp/relocd-control")),
+            sensors: SensorInput::Forwarded(Listen::At(Address::Unix(PathBuf::from("/tmp/relocd-sensors")))),
+            control: Listen::At(Address::Unix(PathBuf::from("/tmp/relocd-control"))),
             publish: PublishConfig::default(),
             burst: BurstConfig::default(),
             camera: CameraConfig::default(),
@@ -198,7 +198,7 @@ impl Config {
             .into_iter()
             .flatten()
             .filter_map(|listen| match listen {
-                Listen::Unix(path) => Some(path.as_path()),
+                Listen::At(Address::Unix(path)) => Some(path.as_path()),
                 _ => None,
             })
             .chain(match &self.source {
@@ -508,22 +508,18 @@ impl fmt::Display for SourceSpec {
 pub enum Listen {
     /// Not listening.
     Off,
-    /// A UDP socket; relocd resolves no host names, so the address is numeric.
-    Udp(SocketAddr),
-    /// A Unix datagram socket, created with owner/group-only permissions.
-    Unix(PathBuf),
+    /// Listening at this address. relocd resolves no host names, so a UDP address is numeric; a Unix
+    /// datagram socket is created with owner/group-only permissions.
+    At(Address),
 }
 
 impl FromStr for Listen {
     type Err = String;
 
     fn from_str(text: &str) -> Result<Self, Self::Err> {
-        if text == "off" {
-            return Ok(Self::Off);
-        }
-        match Address::from_str(text)? {
-            Address::Udp(address) => Ok(Self::Udp(address)),
-            Address::Unix(path) => Ok(Self::Unix(path)),
+        match text {
+            "off" => Ok(Self::Off),
+            _ => text.parse().map(Self::At),
         }
     }
 }
@@ -540,8 +536,7 @@ impl fmt::Display for Listen {
     fn fmt(&self, formatter: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             Self::Off => formatter.write_str("off"),
-            Self::Udp(address) => write!(formatter, "udp:{address}"),
-            Self::Unix(path) => write!(formatter, "unix:{}", path.display()),
+            Self::At(address) => address.fmt(formatter),
         }
     }
 }
@@ -644,7 +639,7 @@ mod tests {
         .unwrap();
         assert_eq!(config.source, SourceSpec::Replay("/data/hall".into()));
         assert_eq!(config.sensors, SensorInput::Lola("/tmp/robocup".into()));
-        assert_eq!(config.control, Listen::Udp("127.0.0.1:5001".parse().unwrap()));
+        assert_eq!(config.control, Listen::At(Address::Udp("127.0.0.1:5001".parse().unwrap())));
         assert_eq!(config.representation, Some(Representation::Quarter));
         assert_eq!(config.backend, Backend::Onnxruntime);
         assert_eq!(config.publish.encoding, Encoding::Msgpack);

@@ -33,6 +33,7 @@ use self::worker::{ModelSlot, Worker};
 use crate::geometry::FieldModel;
 use crate::pipeline::Pipeline;
 use crate::posture::{PostureConfig, PostureDetector};
+use crate::protocol::address::Address;
 use crate::protocol::gamecontroller::PenaltyWatch;
 use crate::relocaliser::{self, Backend, Model};
 
@@ -215,11 +216,10 @@ fn reach(ip: IpAddr) -> &'static str {
 }
 
 /// A listener and its reach.
-fn described(listen: &Listen) -> String {
-    match listen {
-        Listen::Udp(address) => format!("{listen} ({})", reach(address.ip())),
-        Listen::Unix(_) => format!("{listen} (this machine, owner and group only)"),
-        Listen::Off => listen.to_string(),
+fn described(address: &Address) -> String {
+    match address {
+        Address::Udp(socket) => format!("{address} ({})", reach(socket.ip())),
+        Address::Unix(_) => format!("{address} (this machine, owner and group only)"),
     }
 }
 
@@ -254,10 +254,10 @@ fn start_inputs(
     let detector = PostureDetector::new(PostureConfig::default());
     match &config.sensors {
         SensorInput::Forwarded(Listen::Off) => info!("sensor input off: no fall or pick-up trigger"),
-        SensorInput::Forwarded(listen) => {
+        SensorInput::Forwarded(Listen::At(address)) => {
             let socket =
-                Datagram::bind(listen).with_context(|| format!("cannot listen for sensors on {listen}"))?;
-            info!("sensors: {}", described(listen));
+                Datagram::bind(address).with_context(|| format!("cannot listen for sensors on {address}"))?;
+            info!("sensors: {}", described(address));
             tokio::spawn(triggers::sensor_datagrams(
                 socket,
                 config.max_datagram_bytes,
@@ -278,10 +278,10 @@ fn start_inputs(
         }
     }
 
-    if config.control != Listen::Off {
-        let socket = Datagram::bind(&config.control)
-            .with_context(|| format!("cannot open the control socket {}", config.control))?;
-        info!("control: {}", described(&config.control));
+    if let Listen::At(address) = &config.control {
+        let socket =
+            Datagram::bind(address).with_context(|| format!("cannot open the control socket {address}"))?;
+        info!("control: {}", described(address));
         tokio::spawn(triggers::control(socket, config.max_datagram_bytes, triggers.clone(), status.clone()));
     }
     Ok(())

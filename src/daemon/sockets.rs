@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use tokio::net::{UdpSocket, UnixDatagram, UnixListener};
 use tracing::warn;
 
-use super::config::Listen;
+use crate::protocol::address::Address;
 
 /// Largest datagram read; longer ones are truncated by the kernel and then refused by the decoders.
 pub const MAX_DATAGRAM: usize = 65_536;
@@ -34,13 +34,11 @@ pub enum Datagram {
 }
 
 impl Datagram {
-    /// Binds `listen` (not `Listen::Off`). Unix sockets replace a stale socket file and are made
-    /// owner/group-only.
-    pub fn bind(listen: &Listen) -> io::Result<Self> {
-        match listen {
-            Listen::Off => Err(io::Error::new(io::ErrorKind::InvalidInput, "the socket is off")),
-            Listen::Udp(address) => bind_udp(*address, false).map(Self::Udp),
-            Listen::Unix(path) => {
+    /// Binds `address`. Unix sockets replace a stale socket file and are made owner/group-only.
+    pub fn bind(address: &Address) -> io::Result<Self> {
+        match address {
+            Address::Udp(address) => bind_udp(*address, false).map(Self::Udp),
+            Address::Unix(path) => {
                 let file = SocketFile::prepare(path)?;
                 let socket = UnixDatagram::bind(path)?;
                 file.restrict()?;
@@ -168,7 +166,7 @@ mod tests {
         let path = dir.path().join("control");
         let stale = std::os::unix::net::UnixDatagram::bind(&path).unwrap();
         drop(stale);
-        let socket = Datagram::bind(&Listen::Unix(path.clone())).unwrap();
+        let socket = Datagram::bind(&Address::Unix(path.clone())).unwrap();
         let mode = std::fs::metadata(&path).unwrap().permissions().mode() & 0o777;
         assert_eq!(mode, 0o660);
 
@@ -200,7 +198,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("precious");
         std::fs::write(&path, "data").unwrap();
-        let error = Datagram::bind(&Listen::Unix(path.clone())).unwrap_err();
+        let error = Datagram::bind(&Address::Unix(path.clone())).unwrap_err();
         assert!(error.to_string().contains("not a socket"));
         assert_eq!(std::fs::read_to_string(&path).unwrap(), "data");
     }

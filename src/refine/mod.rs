@@ -13,6 +13,8 @@ pub mod optimise;
 pub mod percepts;
 pub mod search;
 
+use std::sync::OnceLock;
+
 use nalgebra::{Point2, Point3, Vector3};
 
 pub use line_map::LineMap;
@@ -136,15 +138,18 @@ pub enum LineVerdict {
 /// Refines hypotheses against one field's lines.
 #[derive(Clone, Debug)]
 pub struct LineRefiner {
+    field: FieldModel,
     map: LineMap,
-    search: SearchMap,
+    /// The global search's coarse map, built the first time a search runs.
+    search: OnceLock<SearchMap>,
     line_width: f64,
     /// Samples along every painted line, field frame.
     line_samples: Vec<Point2<f64>>,
 }
 
 impl LineRefiner {
-    /// Builds the distance map of `field` (once; about 0.6 MB).
+    /// Builds the distance map of `field` (once; about 0.6 MB). The global search's coarse map follows
+    /// when the first search needs it.
     pub fn new(field: &FieldModel) -> Self {
         let map = LineMap::new(field);
         let line_samples = map
@@ -153,8 +158,13 @@ impl LineRefiner {
             .filter(|primitive| expected_to_be_seen(primitive))
             .flat_map(|primitive| primitive.samples(EXPECTED_SPACING))
             .collect();
-        let search = SearchMap::new(field, &map);
-        Self { map, search, line_width: field.dimensions().line_width, line_samples }
+        Self {
+            field: field.clone(),
+            map,
+            search: OnceLock::new(),
+            line_width: field.dimensions().line_width,
+            line_samples,
+        }
     }
 
     /// The field's distance map.
@@ -215,7 +225,8 @@ impl LineRefiner {
         let (step, turn) = search::grid_spacing();
         let sigma = PoseSigma { x: step, y: step, theta: turn };
         let mut places: Vec<LineFit> = Vec::new();
-        for candidate in self.search.candidates(&observations, SEARCH_CANDIDATES) {
+        let search = self.search.get_or_init(|| SearchMap::new(&self.field, &self.map));
+        for candidate in search.candidates(&observations, SEARCH_CANDIDATES) {
             if candidate.mean_distance > SEARCH_MAX_MEAN_DISTANCE {
                 break;
             }

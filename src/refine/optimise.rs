@@ -188,6 +188,24 @@ pub fn fit(map: &LineMap, observations: &[Observation], prior: &Prior) -> Fit {
     }
 }
 
+/// Test views: robot-frame points on the model's lines as seen from `truth`, every 10 cm, kept where
+/// `visible` says (each with σ 2 cm).
+#[cfg(test)]
+pub(super) fn observe_lines(
+    field: &crate::geometry::FieldModel,
+    truth: &FieldPose,
+    visible: impl Fn(Point2<f64>) -> bool,
+) -> Vec<Observation> {
+    LineMap::new(field)
+        .primitives()
+        .iter()
+        .flat_map(|primitive| primitive.samples(0.1))
+        .map(|point| truth.field_to_robot(point))
+        .filter(|&ground| visible(ground))
+        .map(|ground| Observation { ground, sigma: 0.02 })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -196,18 +214,9 @@ mod tests {
 
     /// Robot-frame points on the model's lines as seen from `truth`, within `range` metres ahead.
     fn observe(field: &FieldModel, truth: &FieldPose, range: f64) -> Vec<Observation> {
-        let map = LineMap::new(field);
-        let (sin, cos) = truth.heading().sin_cos();
-        map.primitives()
-            .iter()
-            .flat_map(|primitive| primitive.samples(0.1))
-            .filter_map(|point| {
-                let offset = point - Point2::new(truth.x(), truth.y());
-                let ground = Point2::new(cos * offset.x + sin * offset.y, -sin * offset.x + cos * offset.y);
-                (ground.x > 0.2 && ground.coords.norm() < range && ground.y.abs() < ground.x)
-                    .then_some(Observation { ground, sigma: 0.02 })
-            })
-            .collect()
+        observe_lines(field, truth, |ground| {
+            ground.x > 0.2 && ground.coords.norm() < range && ground.y.abs() < ground.x
+        })
     }
 
     #[test]

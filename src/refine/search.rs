@@ -185,21 +185,13 @@ fn is_local_minimum(scores: &[u32], index: usize, width: usize, height: usize) -
 mod tests {
     use super::*;
     use crate::geometry::Symmetry;
+    use crate::refine::optimise::observe_lines;
 
     /// Robot-frame points on the model's lines as seen from `truth` (ahead, within 3.5 m).
-    pub(crate) fn observe(field: &FieldModel, truth: &FieldPose) -> Vec<Observation> {
-        let map = LineMap::new(field);
-        let (sin, cos) = truth.heading().sin_cos();
-        map.primitives()
-            .iter()
-            .flat_map(|primitive| primitive.samples(0.1))
-            .filter_map(|point| {
-                let offset = point - Point2::new(truth.x(), truth.y());
-                let ground = Point2::new(cos * offset.x + sin * offset.y, -sin * offset.x + cos * offset.y);
-                (ground.x > 0.3 && ground.coords.norm() < 3.5 && ground.y.abs() < 0.8 * ground.x)
-                    .then_some(Observation { ground, sigma: 0.02 })
-            })
-            .collect()
+    fn observe(field: &FieldModel, truth: &FieldPose) -> Vec<Observation> {
+        observe_lines(field, truth, |ground| {
+            ground.x > 0.3 && ground.coords.norm() < 3.5 && ground.y.abs() < 0.8 * ground.x
+        })
     }
 
     #[test]

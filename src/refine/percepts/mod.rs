@@ -517,11 +517,20 @@ mod tests {
             let ball = (x - 500.0).hypot(y - 150.0) < 10.0;
             Rgb(if line || ball { [230, 235, 230] } else { [60, 130, 50] })
         }));
-        let image = detect_in_image(&frame).unwrap();
-        assert!(image.crossings.len() > 30, "{} crossings", image.crossings.len());
+        assert_crossings_on_line(&frame, (200.0, 0.5), 8.0, 30);
+    }
+
+    /// Asserts that `frame` has more than `least` crossings, each within `tolerance` pixels (in v) of
+    /// the line v = offset + slope · u.
+    fn assert_crossings_on_line(frame: &Frame, (offset, slope): (f64, f64), tolerance: f64, least: usize) {
+        let image = detect_in_image(frame).unwrap();
+        assert!(image.crossings.len() > least, "{} crossings", image.crossings.len());
         for crossing in &image.crossings {
             let centre = crossing.centre();
-            assert!((centre.y - 200.0 - 0.5 * centre.x).abs() < 8.0, "{centre:?} is not on the line");
+            assert!(
+                (centre.y - offset - slope * centre.x).abs() < tolerance,
+                "{centre:?} is not on the line"
+            );
         }
     }
 
@@ -541,12 +550,7 @@ mod tests {
                 [60, 130, 50]
             })
         }));
-        let image = detect_in_image(&frame).unwrap();
-        assert!(image.crossings.len() > 40, "{} crossings", image.crossings.len());
-        for crossing in &image.crossings {
-            let centre = crossing.centre();
-            assert!((centre.y - 330.0 - 0.3 * centre.x).abs() < 6.0, "{centre:?} is not on the line");
-        }
+        assert_crossings_on_line(&frame, (330.0, 0.3), 6.0, 40);
     }
 
     #[test]
