@@ -431,7 +431,9 @@ fn run(args: RunArgs, log_level: Option<String>) -> anyhow::Result<()> {
     config.publish.encoding = args.encoding.unwrap_or(config.publish.encoding);
     config.burst.frames = args.burst.unwrap_or(config.burst.frames);
     config.camera.head_yaw_deg = args.head_yaw.unwrap_or(config.camera.head_yaw_deg);
-    config.refine &= !args.no_refine;
+    if args.no_refine {
+        (config.refine, config.global_search) = (false, GlobalSearch::Never);
+    }
     config.log_level = log_level.unwrap_or(config.log_level);
     if !args.publish.is_empty() {
         config.publish.targets = args.publish;

@@ -10,6 +10,7 @@ use serde::Deserialize;
 use thiserror::Error;
 
 use crate::geometry::{CameraMounting, CameraPose, PoseError, Representation};
+use crate::pipeline::GlobalSearch;
 use crate::protocol::address::Address;
 use crate::protocol::message::Encoding;
 use crate::relocaliser::{Backend, LoadOptions};
@@ -85,6 +86,9 @@ pub struct Config {
     pub max_datagram_bytes: usize,
     /// Verify and refine the hypotheses against the field lines in the burst's frames.
     pub refine: bool,
+    /// With `refine`: when the lines also look for places all over the field, beyond the network's
+    /// hypotheses (`never`, `when_unsure`, `always`).
+    pub global_search: GlobalSearch,
     /// The game and team context that tells the symmetric twins apart.
     pub priors: PriorsConfig,
 }
@@ -111,6 +115,7 @@ impl Default for Config {
             process: ProcessConfig::default(),
             max_datagram_bytes: 16_384,
             refine: true,
+            global_search: GlobalSearch::default(),
             priors: PriorsConfig::default(),
         }
     }
@@ -168,6 +173,12 @@ impl Config {
         }
         if !(256..=65_507).contains(&self.max_datagram_bytes) {
             return invalid("max_datagram_bytes", "must lie in 256..=65507 (the largest UDP payload)");
+        }
+        if !self.refine && self.global_search != GlobalSearch::Never {
+            return invalid(
+                "global_search",
+                "the global search is part of line refinement: needs refine = true",
+            );
         }
         if !(1..=1000).contains(&self.frames.queue) {
             return invalid("frames.queue", "must lie in 1..=1000");
@@ -666,6 +677,9 @@ mod tests {
         assert!(pitch.contains("camera.height_m/pitch_deg/roll_deg") && pitch.contains("pitch"), "{pitch}");
         assert!(message("[camera]\nheight_m = -0.5").contains("height"));
         assert!(message("refine = \"yes\"").contains("refine"), "{}", message("refine = \"yes\""));
+        assert!(message("global_search = \"often\"").contains("when_unsure"));
+        assert!(message("refine = false\nglobal_search = \"always\"").contains("global_search"));
+        assert_eq!(parse("global_search = \"when_unsure\"").unwrap().global_search, GlobalSearch::WhenUnsure);
         assert!(message("control = \"unix:/tmp/x\"\nsensors = \"unix:/tmp/x\"").contains("different"));
     }
 

@@ -83,7 +83,11 @@ pub fn run(config: Config) -> anyhow::Result<()> {
 
     let field = FieldModel::new(model.contract().field.clone());
     let pipeline = Pipeline::new(model);
-    let pipeline = if config.refine { pipeline.with_lines(&field) } else { pipeline };
+    let pipeline = if config.refine {
+        pipeline.with_lines(&field).with_global_search(config.global_search)
+    } else {
+        pipeline
+    };
     let worker = Worker {
         pipeline,
         source,
