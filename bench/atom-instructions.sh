@@ -37,7 +37,7 @@ count() {
 
 printf '%-44s %-10s %16s %14s\n' model stage "instructions" "Atom est. ms"
 for model in "${models[@]}"; do
-    for stage in preprocess inference unfold fusion lines refine total; do
+    for stage in preprocess inference unfold fusion lines refine search total; do
         runs=10
         case "$stage" in unfold | fusion) runs=1000 ;; lines | refine) runs=100 ;; esac
         one=$(count "$model" "$stage" 1)
