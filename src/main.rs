@@ -140,6 +140,10 @@ struct RunArgs {
     source: Option<SourceSpec>,
     #[command(flatten)]
     model: ModelArgs,
+    /// Field description file (TOML or JSON, see `relocd field`) whose lines the frames are checked
+    /// against (config `field`) [default: the model contract's field].
+    #[arg(long, value_name = "FILE")]
+    field: Option<PathBuf>,
     /// Decode the model's outputs in this representation instead of its contract's.
     #[arg(long)]
     representation: Option<Representation>,
@@ -280,10 +284,51 @@ struct ReplayArgs {
     /// when the network's heaviest hypothesis is not refined, or always).
     #[arg(long, default_value = "never", value_name = "WHEN")]
     global_search: GlobalSearch,
+    /// With --refine: the field description file (TOML or JSON, see `relocd field`) whose lines the
+    /// frames are checked against, e.g. a lab's field [default: the model contract's field].
+    #[arg(long, value_name = "FILE")]
+    field: Option<PathBuf>,
+    #[command(flatten)]
+    field_of_view: FieldOfViewArgs,
+    /// Added to every recorded camera pitch, degrees (positive looks down): a robot's calibration, or
+    /// a deliberate error to see what one costs.
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true, value_name = "DEG")]
+    camera_pitch_offset: f64,
+    /// Added to every recorded camera roll, degrees.
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true, value_name = "DEG")]
+    camera_roll_offset: f64,
     /// Write plots (error scatter, field map with true and predicted poses) as PNG into this directory.
     #[cfg(feature = "report")]
     #[arg(long, value_name = "DIR")]
     report: Option<PathBuf>,
+}
+
+/// The robot camera's field of view, where it is not the one the model was trained for.
+#[derive(Debug, clap::Args)]
+struct FieldOfViewArgs {
+    /// Horizontal field of view of the camera that took the frames, degrees [default: the model
+    /// contract's; the Nao top camera's 54.7 without a model].
+    #[arg(long, value_name = "DEG")]
+    horizontal_fov: Option<f64>,
+    /// Its vertical field of view, degrees [default: as --horizontal-fov; 42.5].
+    #[arg(long, value_name = "DEG")]
+    vertical_fov: Option<f64>,
+}
+
+impl FieldOfViewArgs {
+    /// `base` with the field of view the flags give.
+    fn applied_to(&self, base: CameraIntrinsics) -> anyhow::Result<CameraIntrinsics> {
+        let radians = |degrees: Option<f64>, default: f64, flag: &str| match degrees {
+            None => Ok(default),
+            Some(degrees) if degrees > 1.0 && degrees < 170.0 => Ok(degrees.to_radians()),
+            Some(degrees) => Err(anyhow::anyhow!("--{flag} {degrees}: expected degrees in (1, 170)")),
+        };
+        Ok(CameraIntrinsics {
+            horizontal_fov: radians(self.horizontal_fov, base.horizontal_fov, "horizontal-fov")?,
+            vertical_fov: radians(self.vertical_fov, base.vertical_fov, "vertical-fov")?,
+            ..base
+        })
+    }
 }
 
 #[derive(Debug, clap::Args)]
@@ -304,12 +349,8 @@ struct InspectArgs {
     /// gate, no ground points).
     #[arg(long, conflicts_with_all = ["camera_height", "camera_pitch", "camera_roll"])]
     no_camera: bool,
-    /// Horizontal field of view, degrees.
-    #[arg(long, default_value_t = 54.7)]
-    horizontal_fov: f64,
-    /// Vertical field of view, degrees.
-    #[arg(long, default_value_t = 42.5)]
-    vertical_fov: f64,
+    #[command(flatten)]
+    field_of_view: FieldOfViewArgs,
     /// TOML config whose [camera] section gives the default camera pose.
     #[arg(long, short)]
     config: Option<PathBuf>,
@@ -431,6 +472,7 @@ fn run(args: RunArgs, log_level: Option<String>) -> anyhow::Result<()> {
     config.publish.encoding = args.encoding.unwrap_or(config.publish.encoding);
     config.burst.frames = args.burst.unwrap_or(config.burst.frames);
     config.camera.head_yaw_deg = args.head_yaw.unwrap_or(config.camera.head_yaw_deg);
+    config.field = args.field.or(config.field);
     if args.no_refine {
         (config.refine, config.global_search) = (false, GlobalSearch::Never);
     }
@@ -612,10 +654,18 @@ fn replay(args: ReplayArgs) -> anyhow::Result<()> {
         "--min-share {} is not in [0, 0.5]: it is the weight share a prior cannot push a hypothesis below",
         args.min_share
     );
+    for (flag, offset) in [
+        ("--camera-pitch-offset", args.camera_pitch_offset),
+        ("--camera-roll-offset", args.camera_roll_offset),
+    ] {
+        anyhow::ensure!(offset.abs() <= 30.0, "{flag} {offset}: expected degrees within ±30");
+    }
+    let lab_field = args.field.as_deref().map(|path| load_field(Some(path))).transpose()?;
     let (pipeline, field) = if args.model.is_none() {
         info!(recording = %directory.display(), frames = recording.records().len(), "replaying with the lines alone");
-        let field = FieldModel::default();
-        (Pipeline::lines_only(&field, CameraIntrinsics::nao_top()), field)
+        let field = lab_field.unwrap_or_default();
+        let intrinsics = args.field_of_view.applied_to(CameraIntrinsics::nao_top())?;
+        (Pipeline::lines_only(&field, intrinsics), field)
     } else {
         let (model, _) = args.model.load()?;
         let contract = model.contract();
@@ -627,8 +677,9 @@ fn replay(args: ReplayArgs) -> anyhow::Result<()> {
             frames = recording.records().len(),
             "replaying"
         );
-        let field = FieldModel::new(contract.field.clone());
-        let pipeline = Pipeline::new(model);
+        let intrinsics = args.field_of_view.applied_to(contract.camera)?;
+        let field = lab_field.unwrap_or_else(|| FieldModel::new(contract.field.clone()));
+        let pipeline = Pipeline::new(model).with_intrinsics(intrinsics);
         let pipeline = if args.refine { pipeline.with_lines(&field) } else { pipeline };
         (pipeline.with_global_search(args.global_search), field)
     };
@@ -641,6 +692,7 @@ fn replay(args: ReplayArgs) -> anyhow::Result<()> {
             priors: args.prior.clone(),
             prior_seed: args.prior_seed,
             min_share: args.min_share,
+            camera_correction: (args.camera_pitch_offset.to_radians(), args.camera_roll_offset.to_radians()),
         },
         &mut stdout.lock(),
     )
@@ -710,16 +762,8 @@ fn inspect(args: InspectArgs) -> anyhow::Result<()> {
     camera.roll_deg = args.camera_roll.unwrap_or(camera.roll_deg);
     let pose =
         camera.mounting().context("--camera-height/--camera-pitch/--camera-roll")?.pose_on(None, None)?;
-    let fov = |degrees: f64, flag: &str| {
-        anyhow::ensure!(degrees > 0.0 && degrees < 180.0, "--{flag} {degrees}: expected degrees in (0, 180)");
-        Ok(degrees.to_radians())
-    };
     let options = relocd::inspect::InspectOptions {
-        intrinsics: CameraIntrinsics {
-            horizontal_fov: fov(args.horizontal_fov, "horizontal-fov")?,
-            vertical_fov: fov(args.vertical_fov, "vertical-fov")?,
-            ..CameraIntrinsics::nao_top()
-        },
+        intrinsics: args.field_of_view.applied_to(CameraIntrinsics::nao_top())?,
         camera: (!args.no_camera).then_some(pose),
         override_recorded_camera: overridden || args.no_camera,
         field: load_field(args.field.as_deref())?,

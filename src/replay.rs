@@ -221,6 +221,9 @@ pub struct ReplayOptions {
     pub prior_seed: u64,
     /// The priors' floor (see [`crate::pipeline::Priors::min_share`]).
     pub min_share: f64,
+    /// Pitch and roll offsets added to every recorded camera pose, radians: a robot's extrinsic
+    /// calibration, or a deliberate error to see what one costs.
+    pub camera_correction: (f64, f64),
 }
 
 /// Relocalises every frame of `recording` with `pipeline`, writing one JSON line per frame to `out`;
@@ -250,9 +253,13 @@ pub fn replay(
             if pipeline.checks_lines() && record.camera.is_none() {
                 warn!("no camera pose recorded: frame not used for line refinement");
             }
-            let result = recording.load_frame(record).map_err(|error| error.to_string()).and_then(|frame| {
-                burst.add(&frame, head_yaw, record.camera.as_ref()).map_err(|error| error.to_string())
-            });
+            let (pitch, roll) = options.camera_correction;
+            let result = (|| {
+                let camera = record.camera.map(|camera| camera.corrected(pitch, roll)).transpose();
+                let camera = camera.map_err(|error| format!("the corrected camera pose: {error}"))?;
+                let frame = recording.load_frame(record).map_err(|error| error.to_string())?;
+                burst.add(&frame, head_yaw, camera.as_ref()).map_err(|error| error.to_string())
+            })();
             let report = match result {
                 Ok(None) => FrameReport::lines_only(record),
                 Ok(Some(result)) => {

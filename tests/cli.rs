@@ -172,6 +172,31 @@ fn replay_refines_the_sample_against_the_field_lines() {
 }
 
 #[test]
+fn a_camera_pitch_error_costs_the_line_fit_and_a_lab_field_is_taken() {
+    let dir = tempfile::tempdir().unwrap();
+    let refined_share = |extra: &[&str]| {
+        let metrics = dir.path().join("metrics.json");
+        let mut args = vec!["replay", "--refine", "--metrics-json", metrics.to_str().unwrap()];
+        args.extend_from_slice(extra);
+        let output = relocd(&args);
+        assert!(output.status.success(), "{extra:?}: {}", stderr(&output));
+        let metrics: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&metrics).unwrap()).unwrap();
+        metrics["refined"]["refined_share"].as_f64().unwrap()
+    };
+    let calibrated = refined_share(&[]);
+    // Two degrees of pitch move a point 2 m away by ~35 cm: the fits no longer hold.
+    let pitched = refined_share(&["--camera-pitch-offset", "2"]);
+    assert!(pitched < calibrated / 2.0, "pitch error: {pitched} refined, calibrated: {calibrated}");
+    // The sample was rendered on the 9 m field: checked against a 7.5 m lab field, most fits fail.
+    let field = dir.path().join("field.toml");
+    let description = stdout(&relocd(&["field"])).replace("field_length = 9.0", "field_length = 7.5");
+    std::fs::write(&field, description).unwrap();
+    let lab = refined_share(&["--field", field.to_str().unwrap()]);
+    assert!(lab < 0.75 * calibrated, "on a lab field: {lab} refined, on its own: {calibrated}");
+}
+
+#[test]
 fn replay_refine_without_camera_poses_keeps_the_network_result_and_says_why() {
     let dir = tempfile::tempdir().unwrap();
     let sample = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/sample");
@@ -331,6 +356,9 @@ fn bad_replay_options_are_rejected_with_a_reason() {
         (&["replay", "--burst", "0"][..], "--burst"),
         (&["replay", "--burst", "65"][..], "--burst"),
         (&["replay", "--prior", "kick-off"][..], "--prior"),
+        (&["replay", "--field", "/nonexistent/field.toml"][..], "/nonexistent/field.toml"),
+        (&["replay", "--horizontal-fov", "0"][..], "--horizontal-fov"),
+        (&["replay", "--camera-roll-offset", "45"][..], "--camera-roll-offset"),
     ] {
         let output = relocd(args);
         assert!(!output.status.success(), "{args:?} should fail");
@@ -454,4 +482,22 @@ fn inspect_without_a_camera_and_on_bad_input() {
     assert!(stderr(&output).contains("broken.png"), "{}", stderr(&output));
     let output = relocd(&["inspect", "--no-camera", "--camera-pitch", "5", image.to_str().unwrap()]);
     assert!(!output.status.success(), "a pose and no pose at once");
+}
+
+#[test]
+fn run_with_a_missing_field_file_says_which_before_it_starts() {
+    let output = relocd(&[
+        "run",
+        "--source",
+        "sim",
+        "--sensors",
+        "off",
+        "--control",
+        "off",
+        "--field",
+        "/nonexistent/lab.toml",
+    ]);
+    assert!(!output.status.success());
+    let message = stderr(&output);
+    assert!(message.contains("field") && message.contains("/nonexistent/lab.toml"), "{message}");
 }

@@ -9,7 +9,7 @@ use std::str::FromStr;
 use serde::Deserialize;
 use thiserror::Error;
 
-use crate::geometry::{CameraMounting, CameraPose, PoseError, Representation};
+use crate::geometry::{CameraIntrinsics, CameraMounting, CameraPose, PoseError, Representation};
 use crate::pipeline::GlobalSearch;
 use crate::protocol::address::Address;
 use crate::protocol::message::Encoding;
@@ -54,6 +54,9 @@ pub struct Config {
     pub source: SourceSpec,
     /// ONNX model file; absent: the model built into the binary for `backend`.
     pub model: Option<PathBuf>,
+    /// Field description file (TOML or JSON, see `relocd field`) whose lines the frames are checked
+    /// against, e.g. a lab's smaller field; absent: the model contract's field.
+    pub field: Option<PathBuf>,
     /// Inference engine: tract (built in) or onnxruntime (the `onnxruntime` feature).
     pub backend: Backend,
     /// Decode the model's outputs in this representation instead of the one its contract names.
@@ -99,6 +102,7 @@ impl Default for Config {
             log_level: "info".into(),
             source: SourceSpec::V4l(PathBuf::from("/dev/video-top")),
             model: None,
+            field: None,
             backend: Backend::default(),
             representation: None,
             team: None,
@@ -195,6 +199,14 @@ impl Config {
         }
         if !self.camera.head_yaw_deg.is_finite() || self.camera.head_yaw_deg.abs() > 120.0 {
             return invalid("camera.head_yaw_deg", "must lie within ±120° (the Nao's head yaw range)");
+        }
+        for (key, fov) in [
+            ("camera.horizontal_fov_deg", self.camera.horizontal_fov_deg),
+            ("camera.vertical_fov_deg", self.camera.vertical_fov_deg),
+        ] {
+            if fov.is_some_and(|degrees| !(degrees > 1.0 && degrees < 170.0)) {
+                return invalid(key, "must lie in (1, 170) degrees");
+            }
         }
         if let Err(error) = self.camera.mounting() {
             return invalid("camera.height_m/pitch_deg/roll_deg", &error.to_string());
@@ -364,6 +376,11 @@ pub struct CameraConfig {
     pub pitch_deg: f64,
     /// Camera roll likewise, degrees.
     pub roll_deg: f64,
+    /// The camera's horizontal field of view, degrees, where a robot's calibration differs from the
+    /// model contract's camera (line points are projected with it).
+    pub horizontal_fov_deg: Option<f64>,
+    /// Its vertical field of view, degrees.
+    pub vertical_fov_deg: Option<f64>,
 }
 
 impl CameraConfig {
@@ -373,6 +390,15 @@ impl CameraConfig {
         let mounted =
             CameraPose::new(self.height_m, self.pitch_deg.to_radians(), self.roll_deg.to_radians(), 0.0)?;
         Ok(CameraMounting { mounted, head_yaw: self.head_yaw_deg.to_radians() })
+    }
+
+    /// `model`'s camera with the configured field of view, if one is configured.
+    pub fn intrinsics(&self, model: CameraIntrinsics) -> Option<CameraIntrinsics> {
+        (self.horizontal_fov_deg.is_some() || self.vertical_fov_deg.is_some()).then(|| CameraIntrinsics {
+            horizontal_fov: self.horizontal_fov_deg.map_or(model.horizontal_fov, f64::to_radians),
+            vertical_fov: self.vertical_fov_deg.map_or(model.vertical_fov, f64::to_radians),
+            ..model
+        })
     }
 }
 
@@ -388,6 +414,8 @@ impl Default for CameraConfig {
             height_m: standing.height(),
             pitch_deg: standing.pitch().to_degrees(),
             roll_deg: standing.roll().to_degrees(),
+            horizontal_fov_deg: None,
+            vertical_fov_deg: None,
         }
     }
 }
@@ -678,8 +706,15 @@ mod tests {
         assert!(message("[camera]\nheight_m = -0.5").contains("height"));
         assert!(message("refine = \"yes\"").contains("refine"), "{}", message("refine = \"yes\""));
         assert!(message("global_search = \"often\"").contains("when_unsure"));
+        assert!(message("[camera]\nhorizontal_fov_deg = 0.5").contains("camera.horizontal_fov_deg"));
         assert!(message("refine = false\nglobal_search = \"always\"").contains("global_search"));
         assert_eq!(parse("global_search = \"when_unsure\"").unwrap().global_search, GlobalSearch::WhenUnsure);
+        let lab = parse("field = \"lab.toml\"\n[camera]\nhorizontal_fov_deg = 60").unwrap();
+        assert_eq!(lab.field, Some(PathBuf::from("lab.toml")));
+        let intrinsics = lab.camera.intrinsics(CameraIntrinsics::nao_top()).unwrap();
+        assert!((intrinsics.horizontal_fov.to_degrees() - 60.0).abs() < 1e-9);
+        assert_eq!(intrinsics.vertical_fov, CameraIntrinsics::nao_top().vertical_fov);
+        assert_eq!(Config::default().camera.intrinsics(CameraIntrinsics::nao_top()), None);
         assert!(message("control = \"unix:/tmp/x\"\nsensors = \"unix:/tmp/x\"").contains("different"));
     }
 

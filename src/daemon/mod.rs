@@ -30,7 +30,7 @@ use self::source::{FrameSource, SourceSettings};
 use self::status::Status;
 use self::triggers::{Sensed, Triggers};
 use self::worker::{ModelSlot, Worker};
-use crate::geometry::FieldModel;
+use crate::geometry::{FieldDimensions, FieldModel};
 use crate::pipeline::Pipeline;
 use crate::posture::{PostureConfig, PostureDetector};
 use crate::protocol::address::Address;
@@ -57,6 +57,15 @@ pub fn run(config: Config) -> anyhow::Result<()> {
             info!("model {} ({}), ONNX Runtime", contract.model_id, contract.representation)
         }
     }
+    let field = match &config.field {
+        Some(path) => {
+            let dimensions = FieldDimensions::load(path).context("the config's `field`")?;
+            info!("field lines from {}", path.display());
+            FieldModel::new(dimensions)
+        }
+        None => FieldModel::new(contract.field.clone()),
+    };
+    let intrinsics = config.camera.intrinsics(contract.camera);
     let status = Arc::new(Status::new(config.source.to_string(), contract.model_id.clone()));
     let publisher = Publisher::new(config.publish.targets.clone(), config.publish.encoding)
         .context("cannot create the publishing sockets")?;
@@ -81,8 +90,11 @@ pub fn run(config: Config) -> anyhow::Result<()> {
     drop(triggers);
     let replacement = Arc::new(ModelSlot::default());
 
-    let field = FieldModel::new(model.contract().field.clone());
     let pipeline = Pipeline::new(model);
+    let pipeline = match intrinsics {
+        Some(intrinsics) => pipeline.with_intrinsics(intrinsics),
+        None => pipeline,
+    };
     let pipeline = if config.refine {
         pipeline.with_lines(&field).with_global_search(config.global_search)
     } else {

@@ -14,12 +14,12 @@ pub const SPL_2025_TOML: &str = include_str!("spl_2025.toml");
 #[derive(Debug, Error)]
 pub enum FieldError {
     /// The file could not be read.
-    #[error("cannot read field file {path}: {source}")]
+    #[error("cannot read field file {path}: {error}")]
     Read {
         /// The file.
         path: String,
-        /// The I/O error.
-        source: std::io::Error,
+        /// The I/O error (in the message, so not also a source to print twice).
+        error: std::io::Error,
     },
     /// The file is not valid TOML/JSON for a field, or has unknown or missing keys.
     #[error("field file {path} is not a valid field description: {reason}")]
@@ -94,8 +94,8 @@ impl FieldDimensions {
     /// Loads a field description from a `.toml` or `.json` file and validates it.
     pub fn load(path: &Path) -> Result<Self, FieldError> {
         let name = path.display().to_string();
-        let text = std::fs::read_to_string(path)
-            .map_err(|source| FieldError::Read { path: name.clone(), source })?;
+        let text =
+            std::fs::read_to_string(path).map_err(|error| FieldError::Read { path: name.clone(), error })?;
         let parsed: Result<Self, String> =
             if path.extension().is_some_and(|extension| extension.eq_ignore_ascii_case("json")) {
                 serde_json::from_str(&text).map_err(|error| error.to_string())

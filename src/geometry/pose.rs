@@ -190,6 +190,12 @@ impl CameraPose {
         self.height
     }
 
+    /// This pose with a robot's calibration added: `pitch` and `roll` offsets, radians (checked as in
+    /// [`CameraPose::new`]).
+    pub fn corrected(&self, pitch: f64, roll: f64) -> Result<Self, PoseError> {
+        Self::new(self.height, self.pitch + pitch, self.roll + roll, self.head_yaw)
+    }
+
     /// Pitch in radians; positive looks down.
     pub fn pitch(&self) -> f64 {
         self.pitch

@@ -93,6 +93,9 @@ pub struct Pipeline {
     refiner: Option<LineRefiner>,
     search: GlobalSearch,
     intrinsics: CameraIntrinsics,
+    /// Whether `intrinsics` are the robot's own (set by [`Pipeline::with_intrinsics`]) rather than
+    /// the model contract's.
+    calibrated: bool,
     /// The camera poses the network was trained for, where its contract says.
     camera_range: Option<CameraRange>,
 }
@@ -107,6 +110,7 @@ impl Pipeline {
             refiner: None,
             search: GlobalSearch::default(),
             intrinsics,
+            calibrated: false,
             camera_range,
         }
     }
@@ -119,6 +123,7 @@ impl Pipeline {
             refiner: Some(LineRefiner::new(field)),
             search: GlobalSearch::Always,
             intrinsics,
+            calibrated: true,
             camera_range: None,
         }
     }
@@ -126,6 +131,13 @@ impl Pipeline {
     /// Verifies and refines every burst against the lines of `field` (builds its distance map once).
     pub fn with_lines(mut self, field: &FieldModel) -> Self {
         self.refiner = Some(LineRefiner::new(field));
+        self
+    }
+
+    /// Projects line points with the robot's own camera intrinsics (its field of view) instead of
+    /// those the model's contract names; they stay when the model is replaced.
+    pub fn with_intrinsics(mut self, intrinsics: CameraIntrinsics) -> Self {
+        (self.intrinsics, self.calibrated) = (intrinsics, true);
         self
     }
 
@@ -145,10 +157,12 @@ impl Pipeline {
         self.refiner.is_some()
     }
 
-    /// Runs `model`, and projects with its contract's camera, from the next burst on (the field whose
-    /// lines are checked stays).
+    /// Runs `model`, and projects with its contract's camera unless the robot's own intrinsics were
+    /// set, from the next burst on (the field whose lines are checked stays).
     pub fn replace_model(&mut self, model: Model) {
-        self.intrinsics = model.contract().camera;
+        if !self.calibrated {
+            self.intrinsics = model.contract().camera;
+        }
         self.camera_range = model.contract().camera_range();
         self.relocaliser = Some(Relocaliser::new(model));
     }
