@@ -290,6 +290,10 @@ struct ReplayArgs {
     field: Option<PathBuf>,
     #[command(flatten)]
     field_of_view: FieldOfViewArgs,
+    /// With --refine: the recorded camera poses are exact (rendered frames), so the line fits estimate
+    /// no correction of the camera's pitch and roll (they do by default, as on a robot).
+    #[arg(long)]
+    exact_camera: bool,
     /// Added to every recorded camera pitch, degrees (positive looks down): a robot's calibration, or
     /// a deliberate error to see what one costs.
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true, value_name = "DEG")]
@@ -665,7 +669,7 @@ fn replay(args: ReplayArgs) -> anyhow::Result<()> {
         info!(recording = %directory.display(), frames = recording.records().len(), "replaying with the lines alone");
         let field = lab_field.unwrap_or_default();
         let intrinsics = args.field_of_view.applied_to(CameraIntrinsics::nao_top())?;
-        (Pipeline::lines_only(&field, intrinsics), field)
+        (Pipeline::lines_only(&field, intrinsics).with_camera_correction(!args.exact_camera), field)
     } else {
         let (model, _) = args.model.load()?;
         let contract = model.contract();
@@ -681,7 +685,7 @@ fn replay(args: ReplayArgs) -> anyhow::Result<()> {
         let field = lab_field.unwrap_or_else(|| FieldModel::new(contract.field.clone()));
         let pipeline = Pipeline::new(model).with_intrinsics(intrinsics);
         let pipeline = if args.refine { pipeline.with_lines(&field) } else { pipeline };
-        (pipeline.with_global_search(args.global_search), field)
+        (pipeline.with_camera_correction(!args.exact_camera).with_global_search(args.global_search), field)
     };
     let stdout = std::io::stdout();
     let summary = relocd::replay::replay(
@@ -692,7 +696,7 @@ fn replay(args: ReplayArgs) -> anyhow::Result<()> {
             priors: args.prior.clone(),
             prior_seed: args.prior_seed,
             min_share: args.min_share,
-            camera_correction: (args.camera_pitch_offset.to_radians(), args.camera_roll_offset.to_radians()),
+            camera_offset: (args.camera_pitch_offset.to_radians(), args.camera_roll_offset.to_radians()),
         },
         &mut stdout.lock(),
     )

@@ -223,7 +223,7 @@ pub struct ReplayOptions {
     pub min_share: f64,
     /// Pitch and roll offsets added to every recorded camera pose, radians: a robot's extrinsic
     /// calibration, or a deliberate error to see what one costs.
-    pub camera_correction: (f64, f64),
+    pub camera_offset: (f64, f64),
 }
 
 /// Relocalises every frame of `recording` with `pipeline`, writing one JSON line per frame to `out`;
@@ -253,7 +253,7 @@ pub fn replay(
             if pipeline.checks_lines() && record.camera.is_none() {
                 warn!("no camera pose recorded: frame not used for line refinement");
             }
-            let (pitch, roll) = options.camera_correction;
+            let (pitch, roll) = options.camera_offset;
             let result = (|| {
                 let camera = record.camera.map(|camera| camera.corrected(pitch, roll)).transpose();
                 let camera = camera.map_err(|error| format!("the corrected camera pose: {error}"))?;

@@ -114,7 +114,8 @@ fn refinement_recovers_perturbed_poses() {
     // RELOCD_REFINE_REALISM=1: the same on frames with hall realism.
     let render =
         if std::env::var_os("RELOCD_REFINE_REALISM").is_some() { rendered_in_a_hall } else { rendered };
-    let refiner = LineRefiner::new(&FieldModel::default());
+    // Rendered frames carry their exact camera pose: nothing to correct.
+    let refiner = LineRefiner::new(&FieldModel::default()).with_camera_correction(false);
     let (mut eligible, mut recovered) = (0usize, 0usize);
     for index in 0..frames {
         let (sampled, frame) = render(index);
@@ -152,7 +153,7 @@ fn refinement_recovers_perturbed_poses() {
 
 #[test]
 fn lines_down_weight_a_contradicted_hypothesis_and_tie_point_twins() {
-    let refiner = LineRefiner::new(&FieldModel::default());
+    let refiner = LineRefiner::new(&FieldModel::default()).with_camera_correction(false);
     // Find a frame with plenty of lines.
     let (sampled, frame, percepts) = (0..40)
         .map(rendered)

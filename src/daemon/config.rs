@@ -92,6 +92,9 @@ pub struct Config {
     /// With `refine`: when the lines also look for places all over the field, beyond the network's
     /// hypotheses (`never`, `when_unsure`, `always`).
     pub global_search: GlobalSearch,
+    /// With `refine`: the line fits also estimate a small correction of the camera's pitch and roll
+    /// (a robot's calibration is never exact).
+    pub camera_correction: bool,
     /// The game and team context that tells the symmetric twins apart.
     pub priors: PriorsConfig,
 }
@@ -120,6 +123,7 @@ impl Default for Config {
             max_datagram_bytes: 16_384,
             refine: true,
             global_search: GlobalSearch::default(),
+            camera_correction: true,
             priors: PriorsConfig::default(),
         }
     }

@@ -96,7 +96,10 @@ pub fn run(config: Config) -> anyhow::Result<()> {
         None => pipeline,
     };
     let pipeline = if config.refine {
-        pipeline.with_lines(&field).with_global_search(config.global_search)
+        pipeline
+            .with_lines(&field)
+            .with_camera_correction(config.camera_correction)
+            .with_global_search(config.global_search)
     } else {
         pipeline
     };

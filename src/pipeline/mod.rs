@@ -141,6 +141,13 @@ impl Pipeline {
         self
     }
 
+    /// Whether the line fits also estimate a correction of the camera's pitch and roll (see
+    /// [`LineRefiner::with_camera_correction`]; on by default). Call after [`Pipeline::with_lines`].
+    pub fn with_camera_correction(mut self, on: bool) -> Self {
+        self.refiner = self.refiner.map(|refiner| refiner.with_camera_correction(on));
+        self
+    }
+
     /// Sets when the lines look for places all over the field (see [`GlobalSearch`]).
     pub fn with_global_search(mut self, search: GlobalSearch) -> Self {
         self.search = search;

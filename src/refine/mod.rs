@@ -15,7 +15,7 @@ pub mod search;
 
 use std::sync::OnceLock;
 
-use nalgebra::{Point2, Point3, Vector3};
+use nalgebra::{Point2, Point3, Vector2, Vector3};
 
 pub use line_map::LineMap;
 use line_map::Primitive;
@@ -142,6 +142,8 @@ pub struct LineRefiner {
     map: LineMap,
     /// The global search's coarse map, built the first time a search runs.
     search: OnceLock<SearchMap>,
+    /// Whether fits also estimate a correction of the camera's pitch and roll.
+    correct_camera: bool,
     line_width: f64,
     /// Samples along every painted line, field frame.
     line_samples: Vec<Point2<f64>>,
@@ -162,9 +164,18 @@ impl LineRefiner {
             field: field.clone(),
             map,
             search: OnceLock::new(),
+            correct_camera: true,
             line_width: field.dimensions().line_width,
             line_samples,
         }
+    }
+
+    /// Whether each fit also estimates a small correction of the camera's pitch and roll (on by
+    /// default: a robot's camera pose is never exact, and half a degree moves a fit by tens of
+    /// centimetres); off where the camera poses are exact, as in rendered recordings.
+    pub fn with_camera_correction(mut self, on: bool) -> Self {
+        self.correct_camera = on;
+        self
     }
 
     /// The field's distance map.
@@ -255,9 +266,9 @@ impl LineRefiner {
                 bounded(guess.sigma.theta, MIN_PRIOR_SIGMA.1, MAX_PRIOR_SIGMA.1),
             ),
         };
-        let fitted = fit(&self.map, observations, &prior);
-        let inlier_share = self.inlier_share(observations, &fitted.pose);
-        let unseen_share = self.unseen_share(frames, &fitted.pose);
+        let fitted = fit(&self.map, observations, &prior, self.correct_camera);
+        let inlier_share = self.inlier_share(observations, &fitted.pose, &fitted.calibration);
+        let unseen_share = self.unseen_share(frames, &fitted.pose, &fitted.calibration);
         let quality = inlier_share * (1.0 - unseen_share.unwrap_or(0.0));
         let points = observations.len();
         if inlier_share < MIN_INLIER_SHARE || unseen_share.is_some_and(|unseen| unseen > MAX_UNSEEN_SHARE) {
@@ -292,23 +303,38 @@ impl LineRefiner {
         }
     }
 
-    /// Share of the points within `INLIER_SIGMAS` σ (or 5 cm) of a line under `pose`.
-    fn inlier_share(&self, observations: &[Observation], pose: &FieldPose) -> f64 {
+    /// Share of the points within `INLIER_SIGMAS` σ (or 5 cm) of a line under `pose`, with the camera
+    /// corrected by `calibration` (pitch, roll).
+    fn inlier_share(
+        &self,
+        observations: &[Observation],
+        pose: &FieldPose,
+        calibration: &Vector2<f64>,
+    ) -> f64 {
         let inliers = observations
             .iter()
             .filter(|observation| {
-                let distance = self.map.residual(pose.robot_to_field(observation.ground)).0;
+                let distance = self.map.residual(pose.robot_to_field(observation.corrected(calibration))).0;
                 distance <= (INLIER_SIGMAS * observation.sigma).max(0.05)
             })
             .count();
         inliers as f64 / observations.len() as f64
     }
 
-    /// Share of the model-line samples some frame should have seen under `pose` that no line point of
-    /// that frame lies near (in the image, within a scan spacing and a bit).
-    fn unseen_share(&self, frames: &[FramePercepts], pose: &FieldPose) -> Option<f64> {
+    /// Share of the model-line samples some frame should have seen under `pose` (its camera corrected
+    /// by `calibration`) that no line point of that frame lies near (in the image, within a scan
+    /// spacing and a bit).
+    fn unseen_share(
+        &self,
+        frames: &[FramePercepts],
+        pose: &FieldPose,
+        calibration: &Vector2<f64>,
+    ) -> Option<f64> {
         let (mut expected, mut unseen) = (0usize, 0usize);
         for frame in frames {
+            let Some(camera) = frame.corrected_camera(calibration.x, calibration.y) else {
+                continue;
+            };
             let tolerance = 1.5 * frame.scan_spacing() as f64 + 1.0;
             for sample in &self.line_samples {
                 let ground = pose.field_to_robot(*sample);
@@ -316,7 +342,7 @@ impl LineRefiner {
                 if !(EXPECTED_RANGE.0..=EXPECTED_RANGE.1).contains(&distance) {
                     continue;
                 }
-                let Some(pixel) = frame.camera().project(&Point3::new(ground.x, ground.y, 0.0)) else {
+                let Some(pixel) = camera.project(&Point3::new(ground.x, ground.y, 0.0)) else {
                     continue;
                 };
                 if !frame.searched(&pixel) {
@@ -358,6 +384,7 @@ fn observations(frames: &[FramePercepts]) -> Vec<Observation> {
                 (distance <= MAX_POINT_DISTANCE).then(|| Observation {
                     ground: point.ground,
                     sigma: POINT_SIGMA + distance * distance / height * PITCH_SIGMA,
+                    calibration_rates: point.calibration_rates,
                 })
             })
         })

@@ -1,8 +1,10 @@
 //! Fitting a robot pose to line points: a coarse search over the starting pose's uncertainty, then
 //! Levenberg–Marquardt on point-to-line distances with a Cauchy loss and the starting pose as a
-//! Gaussian prior. The covariance comes from the final normal equations.
+//! Gaussian prior. The fit also estimates a small correction of the camera's pitch and roll (a robot's
+//! calibration error, which bends every ground point the same way), held to zero by a prior. The
+//! covariance comes from the final normal equations.
 
-use nalgebra::{Matrix3, Point2, Vector2, Vector3};
+use nalgebra::{Matrix2, Matrix3, Point2, SMatrix, SVector, Vector2, Vector3};
 
 use super::line_map::LineMap;
 use crate::geometry::FieldPose;
@@ -18,6 +20,14 @@ const SEARCH_STEP_SIGMAS: f64 = 0.75;
 const STARTS: usize = 3;
 /// Levenberg–Marquardt iterations at most.
 const MAX_ITERATIONS: usize = 30;
+/// Prior standard deviation of the camera's pitch and roll calibration error, radians.
+const CALIBRATION_SIGMA: f64 = 1.0 * std::f64::consts::PI / 180.0;
+/// Largest pitch or roll correction the fit may make, radians.
+const MAX_CALIBRATION: f64 = 3.0 * std::f64::consts::PI / 180.0;
+
+/// (x, y, heading, pitch correction, roll correction).
+type State = SVector<f64, 5>;
+type Matrix5 = SMatrix<f64, 5, 5>;
 
 /// One line point as the optimiser sees it.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -26,6 +36,15 @@ pub struct Observation {
     pub ground: Point2<f64>,
     /// Standard deviation of its position across the line, metres.
     pub sigma: f64,
+    /// How `ground` moves per radian of camera pitch and of roll (zero: a correction does not move it).
+    pub calibration_rates: [Vector2<f64>; 2],
+}
+
+impl Observation {
+    /// The ground position with a camera correction of (pitch, roll) radians.
+    pub fn corrected(&self, calibration: &Vector2<f64>) -> Point2<f64> {
+        self.ground + self.calibration_rates[0] * calibration.x + self.calibration_rates[1] * calibration.y
+    }
 }
 
 /// A pose with its standard deviations: the prior the fit starts from and is held to.
@@ -42,11 +61,14 @@ pub struct Prior {
 pub struct Fit {
     /// The pose.
     pub pose: FieldPose,
+    /// The camera's pitch and roll correction that goes with it, radians.
+    pub calibration: Vector2<f64>,
     /// Robust cost at the pose (lines and prior).
     pub cost: f64,
     /// Covariance of (x, y, heading) from lines and prior.
     pub covariance: Matrix3<f64>,
-    /// Information about (x, y, heading) from the lines alone: degenerate where lines do not constrain.
+    /// Information about (x, y, heading) from the lines alone, with the camera correction left free
+    /// within its prior: degenerate where lines do not constrain.
     pub line_information: Matrix3<f64>,
 }
 
@@ -67,7 +89,12 @@ fn prior_residual(pose: &Vector3<f64>, prior: &Prior) -> Vector3<f64> {
     )
 }
 
-/// The cost using the map's cell distances: cheap, for the coarse search.
+/// The prior's standard deviations of the whole state.
+fn state_sigma(prior: &Prior) -> State {
+    State::new(prior.sigma.x, prior.sigma.y, prior.sigma.z, CALIBRATION_SIGMA, CALIBRATION_SIGMA)
+}
+
+/// The cost using the map's cell distances: cheap, for the coarse search (no camera correction).
 fn coarse_cost(map: &LineMap, observations: &[Observation], pose: &Vector3<f64>, prior: &Prior) -> f64 {
     let lines: f64 = observations
         .iter()
@@ -76,44 +103,64 @@ fn coarse_cost(map: &LineMap, observations: &[Observation], pose: &Vector3<f64>,
     lines + 0.5 * prior_residual(pose, prior).norm_squared()
 }
 
-/// Cost, Gauss–Newton normal equations (H, g) and the lines' share of H at `pose`.
+/// Cost, Gauss–Newton normal equations (H, g) and the lines' share of H at a state.
 struct Linearisation {
     cost: f64,
-    hessian: Matrix3<f64>,
-    gradient: Vector3<f64>,
-    line_information: Matrix3<f64>,
+    hessian: Matrix5,
+    gradient: State,
+    line_information: Matrix5,
 }
 
+/// Linearises at `state`; without `calibrate` the camera correction stays where it is (zero).
 fn linearise(
     map: &LineMap,
     observations: &[Observation],
-    pose: &Vector3<f64>,
+    state: &State,
     prior: &Prior,
+    calibrate: bool,
 ) -> Linearisation {
-    let mut line_information = Matrix3::zeros();
-    let mut gradient = Vector3::zeros();
+    let pose = state.fixed_rows::<3>(0).into_owned();
+    let calibration = state.fixed_rows::<2>(3).into_owned();
+    let mut line_information = Matrix5::zeros();
+    let mut gradient = State::zeros();
     let mut cost = 0.0;
     let (sin, cos) = pose.z.sin_cos();
+    let rotate = |v: &Vector2<f64>| Vector2::new(cos * v.x - sin * v.y, sin * v.x + cos * v.y);
     for observation in observations {
-        let field = to_field(pose, &observation.ground);
+        let ground = observation.corrected(&calibration);
+        let field = to_field(&pose, &ground);
         let (distance, normal) = map.residual(field);
         let error = distance / observation.sigma;
         cost += cauchy(error);
         // IRLS weight of the Cauchy loss.
         let weight = 1.0 / (1.0 + (error / CAUCHY_SCALE).powi(2));
-        let rotated = Vector2::new(
-            cos * observation.ground.x - sin * observation.ground.y,
-            sin * observation.ground.x + cos * observation.ground.y,
-        );
-        let jacobian = Vector3::new(normal.x, normal.y, normal.x * -rotated.y + normal.y * rotated.x)
-            / observation.sigma;
+        let rotated = rotate(&ground.coords);
+        let [pitch_rate, roll_rate] = match calibrate {
+            true => observation.calibration_rates.each_ref().map(rotate),
+            false => [Vector2::zeros(); 2],
+        };
+        let jacobian = State::new(
+            normal.x,
+            normal.y,
+            normal.x * -rotated.y + normal.y * rotated.x,
+            normal.dot(&pitch_rate),
+            normal.dot(&roll_rate),
+        ) / observation.sigma;
         line_information += weight * jacobian * jacobian.transpose();
         gradient += weight * error * jacobian;
     }
-    let residual = prior_residual(pose, prior);
+    let sigma = state_sigma(prior);
+    let pose_residual = prior_residual(&pose, prior);
+    let residual = State::new(
+        pose_residual.x,
+        pose_residual.y,
+        pose_residual.z,
+        calibration.x / CALIBRATION_SIGMA,
+        calibration.y / CALIBRATION_SIGMA,
+    );
     cost += 0.5 * residual.norm_squared();
-    let prior_information = Matrix3::from_diagonal(&prior.sigma.map(|s| 1.0 / (s * s)));
-    gradient += residual.component_div(&prior.sigma);
+    let prior_information = Matrix5::from_diagonal(&sigma.map(|s| 1.0 / (s * s)));
+    gradient += residual.component_div(&sigma);
     Linearisation { cost, hessian: line_information + prior_information, gradient, line_information }
 }
 
@@ -121,29 +168,34 @@ fn linearise(
 fn levenberg_marquardt(
     map: &LineMap,
     observations: &[Observation],
-    start: Vector3<f64>,
+    start: State,
     prior: &Prior,
-) -> (Vector3<f64>, Linearisation) {
-    let mut pose = start;
-    let mut state = linearise(map, observations, &pose, prior);
+    calibrate: bool,
+) -> (State, Linearisation) {
+    let mut state = start;
+    let mut linearised = linearise(map, observations, &state, prior, calibrate);
     let mut damping = 1e-3;
     for _ in 0..MAX_ITERATIONS {
         let mut improved = false;
         while damping < 1e8 {
-            let damped = state.hessian + Matrix3::from_diagonal(&state.hessian.diagonal()) * damping;
-            let Some(step) = damped.cholesky().map(|cholesky| -cholesky.solve(&state.gradient)) else {
+            let damped =
+                linearised.hessian + Matrix5::from_diagonal(&linearised.hessian.diagonal()) * damping;
+            let Some(step) = damped.cholesky().map(|cholesky| -cholesky.solve(&linearised.gradient)) else {
                 damping *= 10.0;
                 continue;
             };
-            let mut candidate = pose + step;
-            candidate.z = normalize_angle(candidate.z);
+            let mut candidate = state + step;
+            candidate[2] = normalize_angle(candidate[2]);
+            for correction in candidate.fixed_rows_mut::<2>(3).iter_mut() {
+                *correction = correction.clamp(-MAX_CALIBRATION, MAX_CALIBRATION);
+            }
             // Linearised at once: an accepted step needs it next, and a rejected one costs little more.
-            let tried = linearise(map, observations, &candidate, prior);
-            if tried.cost < state.cost {
-                pose = candidate;
-                state = tried;
+            let tried = linearise(map, observations, &candidate, prior, calibrate);
+            if tried.cost < linearised.cost {
+                state = candidate;
+                linearised = tried;
                 damping = (damping / 3.0).max(1e-9);
-                improved = step.xy().norm() > 1e-5 || step.z.abs() > 1e-6;
+                improved = step.fixed_rows::<2>(0).norm() > 1e-5 || step.fixed_rows::<3>(2).amax() > 1e-6;
                 break;
             }
             damping *= 4.0;
@@ -152,12 +204,14 @@ fn levenberg_marquardt(
             break;
         }
     }
-    (pose, state)
+    (state, linearised)
 }
 
 /// Fits the pose that best explains `observations`, starting from and held to `prior`: a coarse
-/// search over ±1.5 σ of the prior on the distance map, then Levenberg–Marquardt from the best few.
-pub fn fit(map: &LineMap, observations: &[Observation], prior: &Prior) -> Fit {
+/// search over ±1.5 σ of the prior on the distance map, then Levenberg–Marquardt from the best few
+/// with the camera as given; with `calibrate`, from the best once more with the camera's pitch and
+/// roll free within their prior.
+pub fn fit(map: &LineMap, observations: &[Observation], prior: &Prior, calibrate: bool) -> Fit {
     let centre = Vector3::new(prior.pose.x(), prior.pose.y(), prior.pose.heading());
     let step = prior.sigma * SEARCH_STEP_SIGMAS;
     let mut candidates: Vec<(f64, Vector3<f64>)> = Vec::new();
@@ -170,21 +224,45 @@ pub fn fit(map: &LineMap, observations: &[Observation], prior: &Prior) -> Fit {
         }
     }
     candidates.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let best = candidates
+    let (state, linearised) = candidates
         .iter()
         .take(STARTS)
-        .map(|(_, start)| levenberg_marquardt(map, observations, *start, prior))
+        .map(|(_, start)| {
+            let start = State::new(start.x, start.y, start.z, 0.0, 0.0);
+            levenberg_marquardt(map, observations, start, prior, false)
+        })
         .min_by(|a, b| a.1.cost.total_cmp(&b.1.cost))
         .expect("at least one start");
-    let (pose, state) = best;
-    let covariance =
-        state.hessian.try_inverse().unwrap_or_else(|| Matrix3::from_diagonal(&prior.sigma.map(|s| s * s)));
+    let (state, linearised) = if calibrate {
+        levenberg_marquardt(map, observations, state, prior, true)
+    } else {
+        (state, linearised)
+    };
+    let covariance = linearised
+        .hessian
+        .try_inverse()
+        .map(|covariance| covariance.fixed_view::<3, 3>(0, 0).into_owned())
+        .unwrap_or_else(|| Matrix3::from_diagonal(&prior.sigma.map(|s| s * s)));
     Fit {
         // Finite points and a finite prior give a finite fit; should that ever fail, keep the prior.
-        pose: FieldPose::new(pose.x, pose.y, pose.z).unwrap_or(prior.pose),
-        cost: state.cost,
+        pose: FieldPose::new(state[0], state[1], state[2]).unwrap_or(prior.pose),
+        calibration: state.fixed_rows::<2>(3).into_owned(),
+        cost: linearised.cost,
         covariance,
-        line_information: state.line_information,
+        line_information: pose_information(&linearised.line_information),
+    }
+}
+
+/// The lines' information about the pose alone, the camera correction marginalised out within its
+/// prior (Schur complement).
+fn pose_information(lines: &Matrix5) -> Matrix3<f64> {
+    let pose = lines.fixed_view::<3, 3>(0, 0).into_owned();
+    let cross = lines.fixed_view::<3, 2>(0, 3).into_owned();
+    let calibration = lines.fixed_view::<2, 2>(3, 3).into_owned()
+        + Matrix2::from_diagonal_element(1.0 / (CALIBRATION_SIGMA * CALIBRATION_SIGMA));
+    match calibration.try_inverse() {
+        Some(inverse) => pose - cross * inverse * cross.transpose(),
+        None => pose,
     }
 }
 
@@ -202,7 +280,7 @@ pub(super) fn observe_lines(
         .flat_map(|primitive| primitive.samples(0.1))
         .map(|point| truth.field_to_robot(point))
         .filter(|&ground| visible(ground))
-        .map(|ground| Observation { ground, sigma: 0.02 })
+        .map(|ground| Observation { ground, sigma: 0.02, calibration_rates: [Vector2::zeros(); 2] })
         .collect()
 }
 
@@ -230,7 +308,7 @@ mod tests {
             pose: FieldPose::new(-3.2, -1.8, -2.4 + 0.2).unwrap(),
             sigma: Vector3::new(0.4, 0.4, 0.2),
         };
-        let fit = fit(&map, &observations, &prior);
+        let fit = fit(&map, &observations, &prior, true);
         assert!(fit.pose.distance_to(&truth) < 0.01, "{:?}", fit.pose);
         assert_abs_diff_eq!(fit.pose.heading(), truth.heading(), epsilon = 0.005);
         assert!(fit.covariance[(0, 0)].sqrt() < 0.05);
@@ -247,10 +325,42 @@ mod tests {
         assert!(observations.len() > 10);
         let prior =
             Prior { pose: FieldPose::new(1.4, 2.5, 0.05).unwrap(), sigma: Vector3::new(0.3, 0.3, 0.1) };
-        let fit = fit(&map, &observations, &prior);
+        let fit = fit(&map, &observations, &prior, true);
         assert_abs_diff_eq!(fit.pose.y(), truth.y(), epsilon = 0.01);
         assert_abs_diff_eq!(fit.pose.x(), 1.4, epsilon = 0.05);
         // Along the line the lines say nothing: the information there is (almost) zero.
         assert!(fit.line_information[(0, 0)] < 1e-6 * fit.line_information[(1, 1)]);
+    }
+
+    #[test]
+    fn a_camera_pitch_error_is_estimated_and_the_pose_stays_true() {
+        let field = FieldModel::default();
+        let map = LineMap::new(&field);
+        let truth = FieldPose::new(-3.5, -1.5, -2.4).unwrap();
+        // A camera 0.5 m high pitched 0.8° more than the robot believes: every point seen too far
+        // away, by d(distance)/d(pitch) = -(d² + h²) / h along its bearing.
+        let (height, error) = (0.5, 0.8_f64.to_radians());
+        let observations: Vec<Observation> = observe(&field, &truth, 3.0)
+            .into_iter()
+            .map(|observation| {
+                let distance = observation.ground.coords.norm();
+                let pitch_rate =
+                    -(distance * distance + height * height) / height * observation.ground.coords / distance;
+                Observation {
+                    ground: observation.ground - pitch_rate * error,
+                    calibration_rates: [pitch_rate, Vector2::zeros()],
+                    ..observation
+                }
+            })
+            .collect();
+        let prior =
+            Prior { pose: FieldPose::new(-3.3, -1.7, -2.3).unwrap(), sigma: Vector3::new(0.4, 0.4, 0.2) };
+        let trusted = fit(&map, &observations, &prior, false);
+        assert!(trusted.pose.distance_to(&truth) > 0.05, "the error moves the fit: {:?}", trusted.pose);
+        let corrected = fit(&map, &observations, &prior, true);
+        assert!(corrected.pose.distance_to(&truth) < 0.02, "{:?}", corrected.pose);
+        assert_abs_diff_eq!(corrected.pose.heading(), truth.heading(), epsilon = 0.005);
+        assert_abs_diff_eq!(corrected.calibration.x, error, epsilon = 0.15_f64.to_radians());
+        assert!(corrected.cost < trusted.cost);
     }
 }

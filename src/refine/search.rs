@@ -224,7 +224,11 @@ mod tests {
         let field = FieldModel::default();
         let search = SearchMap::new(&field, &LineMap::new(&field));
         assert!(search.candidates(&[], 10).is_empty());
-        let far = [Observation { ground: Point2::new(9.0, 0.0), sigma: 0.02 }];
+        let far = [Observation {
+            ground: Point2::new(9.0, 0.0),
+            sigma: 0.02,
+            calibration_rates: [nalgebra::Vector2::zeros(); 2],
+        }];
         assert!(search.candidates(&far, 10).is_empty(), "points beyond reach are left out");
     }
 

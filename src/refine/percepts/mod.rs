@@ -19,7 +19,7 @@
 mod palette;
 mod scan;
 
-use nalgebra::Point2;
+use nalgebra::{Point2, Vector2};
 use thiserror::Error;
 
 use crate::frame::{Frame, rgb_to_yuv};
@@ -43,6 +43,8 @@ const MIN_CONTINUATION_OFFSET: usize = 3;
 const ONE_SIDED_REACH: usize = 3;
 /// Pitch error of the camera pose the ground-width gate tolerates, radians.
 const PITCH_TOLERANCE: f64 = 3.0 * std::f64::consts::PI / 180.0;
+/// Pitch and roll step of the central differences that give each point's calibration rates, radians.
+const CALIBRATION_STEP: f64 = 0.25 * std::f64::consts::PI / 180.0;
 /// A line's width on the ground may lie between these multiples of the painted width.
 const GROUND_WIDTH_RANGE: (f64, f64) = (0.4, 3.0);
 /// Weight of each carpet pixel in the running carpet brightness along a scan line.
@@ -150,6 +152,8 @@ pub struct LinePoint {
     pub ground: Point2<f64>,
     /// Where it was seen in the image, pixels.
     pub pixel: Point2<f64>,
+    /// How `ground` moves per radian of camera pitch and per radian of roll (a calibration error).
+    pub calibration_rates: [Vector2<f64>; 2],
 }
 
 /// The line points of one frame, with what is needed to tell where lines should have been seen.
@@ -158,7 +162,8 @@ pub struct FramePercepts {
     /// The line points found.
     pub points: Vec<LinePoint>,
     camera: Camera,
-    camera_height: f64,
+    intrinsics: CameraIntrinsics,
+    camera_pose: CameraPose,
     image: ImagePercepts,
 }
 
@@ -170,7 +175,15 @@ impl FramePercepts {
 
     /// Height of the camera above the ground, metres.
     pub fn camera_height(&self) -> f64 {
-        self.camera_height
+        self.camera_pose.height()
+    }
+
+    /// The camera with `pitch` and `roll` (radians) added to its pose, as a calibration correction
+    /// puts it; `None` where that pose is impossible.
+    pub fn corrected_camera(&self, pitch: f64, roll: f64) -> Option<Camera> {
+        let origin = FieldPose::new(0.0, 0.0, 0.0).expect("the origin is finite");
+        let pose = self.camera_pose.corrected(pitch, roll).ok()?;
+        Some(Camera::new(self.intrinsics, &origin, &pose))
     }
 
     /// Pixels between neighbouring scan lines.
@@ -458,22 +471,40 @@ pub fn detect(
             pose.ok().map(|pose| Camera::new(intrinsics, &origin, &pose))
         })
         .collect();
+    // The camera turned a little each way in pitch and in roll, for each point's calibration rates.
+    let turned = |pitch: f64, roll: f64| {
+        let pose = camera_pose.corrected(pitch, roll).ok()?;
+        Some(Camera::new(intrinsics, &origin, &pose))
+    };
+    let step = CALIBRATION_STEP;
+    let turns = [(turned(step, 0.0), turned(-step, 0.0)), (turned(0.0, step), turned(0.0, -step))];
     let mut points: Vec<LinePoint> = image
         .crossings
         .iter()
         .filter_map(|crossing| {
-            let ground = camera.ground_point(crossing.centre().x, crossing.centre().y)?;
+            let centre = crossing.centre();
+            let ground = camera.ground_point(centre.x, centre.y)?;
             let fits = std::iter::once(&camera)
                 .chain(&tilted)
                 .any(|camera| ground_width_fits(camera, crossing, line_width));
-            fits.then_some(LinePoint { ground, pixel: crossing.centre() })
+            if !fits {
+                return None;
+            }
+            let rate = |(more, less): &(Option<Camera>, Option<Camera>)| {
+                let more = more.as_ref()?.ground_point(centre.x, centre.y)?;
+                let less = less.as_ref()?.ground_point(centre.x, centre.y)?;
+                Some((more - less) / (2.0 * step))
+            };
+            // A point a turned camera cannot place (near the horizon) gets no rate: no correction moves it.
+            let calibration_rates = turns.each_ref().map(|turn| rate(turn).unwrap_or_else(Vector2::zeros));
+            Some(LinePoint { ground, pixel: centre, calibration_rates })
         })
         .collect();
     if points.len() > MAX_POINTS {
         let stride = points.len() as f64 / MAX_POINTS as f64;
         points = (0..MAX_POINTS).map(|i| points[(i as f64 * stride) as usize]).collect();
     }
-    Ok(FramePercepts { points, camera, camera_height: camera_pose.height(), image })
+    Ok(FramePercepts { points, camera, intrinsics, camera_pose: *camera_pose, image })
 }
 
 /// Whether a crossing's width on the ground under `camera` fits a painted line of `line_width`.
