@@ -20,10 +20,20 @@ const SEARCH_STEP_SIGMAS: f64 = 0.75;
 const STARTS: usize = 3;
 /// Levenberg–Marquardt iterations at most.
 const MAX_ITERATIONS: usize = 30;
+/// Iterations at most of the second pass with the camera correction free: it starts at the
+/// camera-trusting fit, a few steps away.
+const CALIBRATION_ITERATIONS: usize = 6;
 /// Prior standard deviation of the camera's pitch and roll calibration error, radians.
 const CALIBRATION_SIGMA: f64 = 1.0 * std::f64::consts::PI / 180.0;
 /// Largest pitch or roll correction the fit may make, radians.
 const MAX_CALIBRATION: f64 = 3.0 * std::f64::consts::PI / 180.0;
+
+/// The camera correction is estimated only where the camera-trusting fit already puts at least this
+/// share of the points within [`CORRECTABLE_DISTANCE`] of a line: a wrong place stays wrong whatever
+/// the camera, and the global search fits many.
+const CORRECTABLE_SHARE: f64 = 0.5;
+/// See [`CORRECTABLE_SHARE`], metres.
+const CORRECTABLE_DISTANCE: f64 = 0.15;
 
 /// (x, y, heading, pitch correction, roll correction).
 type State = SVector<f64, 5>;
@@ -171,11 +181,12 @@ fn levenberg_marquardt(
     start: State,
     prior: &Prior,
     calibrate: bool,
+    iterations: usize,
 ) -> (State, Linearisation) {
     let mut state = start;
     let mut linearised = linearise(map, observations, &state, prior, calibrate);
     let mut damping = 1e-3;
-    for _ in 0..MAX_ITERATIONS {
+    for _ in 0..iterations {
         let mut improved = false;
         while damping < 1e8 {
             let damped =
@@ -229,12 +240,13 @@ pub fn fit(map: &LineMap, observations: &[Observation], prior: &Prior, calibrate
         .take(STARTS)
         .map(|(_, start)| {
             let start = State::new(start.x, start.y, start.z, 0.0, 0.0);
-            levenberg_marquardt(map, observations, start, prior, false)
+            levenberg_marquardt(map, observations, start, prior, false, MAX_ITERATIONS)
         })
         .min_by(|a, b| a.1.cost.total_cmp(&b.1.cost))
         .expect("at least one start");
-    let (state, linearised) = if calibrate {
-        levenberg_marquardt(map, observations, state, prior, true)
+    let (state, linearised) = if calibrate && explained_share(map, observations, &state) >= CORRECTABLE_SHARE
+    {
+        levenberg_marquardt(map, observations, state, prior, true, CALIBRATION_ITERATIONS)
     } else {
         (state, linearised)
     };
@@ -251,6 +263,16 @@ pub fn fit(map: &LineMap, observations: &[Observation], prior: &Prior, calibrate
         covariance,
         line_information: pose_information(&linearised.line_information),
     }
+}
+
+/// Share of the points within [`CORRECTABLE_DISTANCE`] of a line (or 3 σ, if more) at `state`.
+fn explained_share(map: &LineMap, observations: &[Observation], state: &State) -> f64 {
+    let pose = state.fixed_rows::<3>(0).into_owned();
+    let explained = observations
+        .iter()
+        .filter(|o| map.distance(to_field(&pose, &o.ground)) <= (3.0 * o.sigma).max(CORRECTABLE_DISTANCE))
+        .count();
+    explained as f64 / observations.len().max(1) as f64
 }
 
 /// The lines' information about the pose alone, the camera correction marginalised out within its
