@@ -237,7 +237,7 @@ impl LineRefiner {
         let sigma = PoseSigma { x: step, y: step, theta: turn };
         let mut places: Vec<LineFit> = Vec::new();
         let search = self.search.get_or_init(|| SearchMap::new(&self.field, &self.map));
-        for candidate in search.candidates(&observations, SEARCH_CANDIDATES) {
+        for candidate in search.candidates(&observations, SEARCH_CANDIDATES, SEARCH_MAX_MEAN_DISTANCE) {
             if candidate.mean_distance > SEARCH_MAX_MEAN_DISTANCE {
                 break;
             }

@@ -28,6 +28,11 @@ const TRUNCATION: f64 = 0.3;
 pub const REACH: f64 = 5.0;
 /// Points scored, at most (evenly spread over the burst's points).
 const MAX_POINTS: usize = 64;
+/// Every this many points is a probe, scored first at every pose.
+const PROBE_STRIDE: usize = 4;
+/// A pose is left unscored when its probes lie farther from the lines on average than this many
+/// times the largest mean distance a candidate may have.
+const PROBE_MARGIN: f64 = 1.5;
 
 /// A grid pose and its score (lower is better; 255 per point means "far from every line").
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -80,13 +85,30 @@ impl SearchMap {
         }
     }
 
-    /// The grid's local minima over positions and headings in [0, π), best first, at most `count`.
+    /// The grid's local minima over positions and headings in [0, π), best first, at most `count`,
+    /// none whose points lie farther than `max_mean_distance` (metres) from the lines on average.
     /// `observations` are robot-frame ground points (farther than [`REACH`] are left out).
-    pub fn candidates(&self, observations: &[Observation], count: usize) -> Vec<Candidate> {
+    pub fn candidates(
+        &self,
+        observations: &[Observation],
+        count: usize,
+        max_mean_distance: f64,
+    ) -> Vec<Candidate> {
         let points: Vec<Point2<f64>> = spread(observations);
         if points.is_empty() {
             return Vec::new();
         }
+        // Every PROBE_STRIDE-th point first: a pose whose probes already lie far off the lines is
+        // left unscored (u32::MAX), which spares most of the field most of its points.
+        let probes = points.len().div_ceil(PROBE_STRIDE);
+        let points: Vec<Point2<f64>> = points
+            .iter()
+            .step_by(PROBE_STRIDE)
+            .chain(points.iter().enumerate().filter(|(i, _)| i % PROBE_STRIDE != 0).map(|(_, point)| point))
+            .copied()
+            .collect();
+        let probe_limit =
+            (PROBE_MARGIN * max_mean_distance.min(TRUNCATION) / TRUNCATION * 255.0 * probes as f64) as u32;
         let (width, height) = (self.positions.0 as usize, self.positions.1 as usize);
         let layer = width * height;
         let mut scores = vec![0u32; HEADINGS * layer];
@@ -98,19 +120,23 @@ impl SearchMap {
                 let dy = ((sin * point.x + cos * point.y) / CELL).round() as isize;
                 *offset = dy * self.columns as isize + dx;
             }
+            let (probe_offsets, rest_offsets) = offsets.split_at(probes);
             for (row, row_scores) in layer_scores.chunks_exact_mut(width).enumerate() {
                 let cell_y = self.first.1 as usize + row * POSITION_STEP as usize;
                 for (column, score) in row_scores.iter_mut().enumerate() {
                     let cell_x = self.first.0 as usize + column * POSITION_STEP as usize;
                     let base = (cell_y * self.columns + cell_x) as isize;
                     // Every offset stays within the padding, so the index is in the map.
-                    *score =
-                        offsets.iter().map(|offset| u32::from(self.cells[(base + offset) as usize])).sum();
+                    let sum = |offsets: &[isize]| -> u32 {
+                        offsets.iter().map(|offset| u32::from(self.cells[(base + offset) as usize])).sum()
+                    };
+                    let probed = sum(probe_offsets);
+                    *score = if probed > probe_limit { u32::MAX } else { probed + sum(rest_offsets) };
                 }
             }
         }
         let mut minima: Vec<(u32, usize)> = (0..scores.len())
-            .filter(|&index| is_local_minimum(&scores, index, width, height))
+            .filter(|&index| scores[index] != u32::MAX && is_local_minimum(&scores, index, width, height))
             .map(|index| (scores[index], index))
             .collect();
         minima.sort_unstable();
@@ -205,7 +231,7 @@ mod tests {
         ] {
             let observations = observe(&field, &truth);
             assert!(observations.len() > 20, "{}", observations.len());
-            let candidates = search.candidates(&observations, 10);
+            let candidates = search.candidates(&observations, 10, 0.12);
             let twin = Symmetry::PointReflection.apply(&truth);
             let (step, turn) = grid_spacing();
             let found = candidates.iter().any(|candidate| {
@@ -223,13 +249,13 @@ mod tests {
     fn no_points_no_candidates() {
         let field = FieldModel::default();
         let search = SearchMap::new(&field, &LineMap::new(&field));
-        assert!(search.candidates(&[], 10).is_empty());
+        assert!(search.candidates(&[], 10, 0.12).is_empty());
         let far = [Observation {
             ground: Point2::new(9.0, 0.0),
             sigma: 0.02,
             calibration_rates: [nalgebra::Vector2::zeros(); 2],
         }];
-        assert!(search.candidates(&far, 10).is_empty(), "points beyond reach are left out");
+        assert!(search.candidates(&far, 10, 0.12).is_empty(), "points beyond reach are left out");
     }
 
     #[test]
