@@ -322,15 +322,8 @@ struct FieldOfViewArgs {
 impl FieldOfViewArgs {
     /// `base` with the field of view the flags give.
     fn applied_to(&self, base: CameraIntrinsics) -> anyhow::Result<CameraIntrinsics> {
-        let radians = |degrees: Option<f64>, default: f64, flag: &str| match degrees {
-            None => Ok(default),
-            Some(degrees) if degrees > 1.0 && degrees < 170.0 => Ok(degrees.to_radians()),
-            Some(degrees) => Err(anyhow::anyhow!("--{flag} {degrees}: expected degrees in (1, 170)")),
-        };
-        Ok(CameraIntrinsics {
-            horizontal_fov: radians(self.horizontal_fov, base.horizontal_fov, "horizontal-fov")?,
-            vertical_fov: radians(self.vertical_fov, base.vertical_fov, "vertical-fov")?,
-            ..base
+        base.with_field_of_view(self.horizontal_fov, self.vertical_fov).map_err(|(axis, degrees)| {
+            anyhow::anyhow!("--{axis}-fov {degrees}: expected degrees in (1, 170)")
         })
     }
 }

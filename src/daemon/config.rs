@@ -204,13 +204,10 @@ impl Config {
         if !self.camera.head_yaw_deg.is_finite() || self.camera.head_yaw_deg.abs() > 120.0 {
             return invalid("camera.head_yaw_deg", "must lie within ±120° (the Nao's head yaw range)");
         }
-        for (key, fov) in [
-            ("camera.horizontal_fov_deg", self.camera.horizontal_fov_deg),
-            ("camera.vertical_fov_deg", self.camera.vertical_fov_deg),
-        ] {
-            if fov.is_some_and(|degrees| !(degrees > 1.0 && degrees < 170.0)) {
-                return invalid(key, "must lie in (1, 170) degrees");
-            }
+        if let Err((axis, _)) = self.camera.intrinsics(CameraIntrinsics::nao_top()) {
+            let key =
+                if axis == "horizontal" { "camera.horizontal_fov_deg" } else { "camera.vertical_fov_deg" };
+            return invalid(key, "must lie in (1, 170) degrees");
         }
         if let Err(error) = self.camera.mounting() {
             return invalid("camera.height_m/pitch_deg/roll_deg", &error.to_string());
@@ -396,13 +393,16 @@ impl CameraConfig {
         Ok(CameraMounting { mounted, head_yaw: self.head_yaw_deg.to_radians() })
     }
 
-    /// `model`'s camera with the configured field of view, if one is configured.
-    pub fn intrinsics(&self, model: CameraIntrinsics) -> Option<CameraIntrinsics> {
-        (self.horizontal_fov_deg.is_some() || self.vertical_fov_deg.is_some()).then(|| CameraIntrinsics {
-            horizontal_fov: self.horizontal_fov_deg.map_or(model.horizontal_fov, f64::to_radians),
-            vertical_fov: self.vertical_fov_deg.map_or(model.vertical_fov, f64::to_radians),
-            ..model
-        })
+    /// `model`'s camera with the configured field of view, if one is configured; the error names the
+    /// axis and degrees out of range (see [`CameraIntrinsics::with_field_of_view`]).
+    pub fn intrinsics(
+        &self,
+        model: CameraIntrinsics,
+    ) -> Result<Option<CameraIntrinsics>, (&'static str, f64)> {
+        if self.horizontal_fov_deg.is_none() && self.vertical_fov_deg.is_none() {
+            return Ok(None);
+        }
+        model.with_field_of_view(self.horizontal_fov_deg, self.vertical_fov_deg).map(Some)
     }
 }
 
@@ -715,10 +715,10 @@ mod tests {
         assert_eq!(parse("global_search = \"when_unsure\"").unwrap().global_search, GlobalSearch::WhenUnsure);
         let lab = parse("field = \"lab.toml\"\n[camera]\nhorizontal_fov_deg = 60").unwrap();
         assert_eq!(lab.field, Some(PathBuf::from("lab.toml")));
-        let intrinsics = lab.camera.intrinsics(CameraIntrinsics::nao_top()).unwrap();
+        let intrinsics = lab.camera.intrinsics(CameraIntrinsics::nao_top()).unwrap().unwrap();
         assert!((intrinsics.horizontal_fov.to_degrees() - 60.0).abs() < 1e-9);
         assert_eq!(intrinsics.vertical_fov, CameraIntrinsics::nao_top().vertical_fov);
-        assert_eq!(Config::default().camera.intrinsics(CameraIntrinsics::nao_top()), None);
+        assert_eq!(Config::default().camera.intrinsics(CameraIntrinsics::nao_top()), Ok(None));
         assert!(message("control = \"unix:/tmp/x\"\nsensors = \"unix:/tmp/x\"").contains("different"));
     }
 

@@ -65,7 +65,7 @@ pub fn run(config: Config) -> anyhow::Result<()> {
         }
         None => FieldModel::new(contract.field.clone()),
     };
-    let intrinsics = config.camera.intrinsics(contract.camera);
+    let intrinsics = config.camera.intrinsics(contract.camera).expect("validated with the config");
     let status = Arc::new(Status::new(config.source.to_string(), contract.model_id.clone()));
     let publisher = Publisher::new(config.publish.targets.clone(), config.publish.encoding)
         .context("cannot create the publishing sockets")?;

@@ -32,6 +32,26 @@ impl CameraIntrinsics {
         }
     }
 
+    /// These intrinsics with the horizontal and vertical field of view given in degrees, where
+    /// given (a robot's calibration); each must lie in (1°, 170°). The error names the axis and
+    /// the degrees refused.
+    pub fn with_field_of_view(
+        self,
+        horizontal_deg: Option<f64>,
+        vertical_deg: Option<f64>,
+    ) -> Result<Self, (&'static str, f64)> {
+        let radians = |degrees: Option<f64>, default: f64, axis: &'static str| match degrees {
+            None => Ok(default),
+            Some(degrees) if degrees > 1.0 && degrees < 170.0 => Ok(degrees.to_radians()),
+            Some(degrees) => Err((axis, degrees)),
+        };
+        Ok(Self {
+            horizontal_fov: radians(horizontal_deg, self.horizontal_fov, "horizontal")?,
+            vertical_fov: radians(vertical_deg, self.vertical_fov, "vertical")?,
+            ..self
+        })
+    }
+
     /// The same field of view at another resolution (e.g. the network's input size).
     pub fn with_resolution(self, width: u32, height: u32) -> Self {
         Self { width, height, ..self }

@@ -238,9 +238,6 @@ impl LineRefiner {
         let mut places: Vec<LineFit> = Vec::new();
         let search = self.search.get_or_init(|| SearchMap::new(&self.field, &self.map));
         for candidate in search.candidates(&observations, SEARCH_CANDIDATES, SEARCH_MAX_MEAN_DISTANCE) {
-            if candidate.mean_distance > SEARCH_MAX_MEAN_DISTANCE {
-                break;
-            }
             let fit = self.check_one(frames, &observations, &Guess { pose: candidate.pose, sigma });
             if fit.evidence.check == LineCheck::Contradicted
                 || places.iter().any(|place| same_place_or_twin(&place.pose, &fit.pose))

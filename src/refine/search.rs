@@ -154,6 +154,7 @@ impl SearchMap {
                     mean_distance: f64::from(score) / points.len() as f64 / 255.0 * TRUNCATION,
                 }
             })
+            .take_while(|candidate| candidate.mean_distance <= max_mean_distance)
             .collect()
     }
 }

@@ -161,29 +161,22 @@ pub struct LinePoint {
 pub struct FramePercepts {
     /// The line points found.
     pub points: Vec<LinePoint>,
-    camera: Camera,
     intrinsics: CameraIntrinsics,
     camera_pose: CameraPose,
     image: ImagePercepts,
 }
 
 impl FramePercepts {
-    /// The camera of a robot standing at the robot-frame origin: projects robot-frame ground points.
-    pub fn camera(&self) -> &Camera {
-        &self.camera
-    }
-
     /// Height of the camera above the ground, metres.
     pub fn camera_height(&self) -> f64 {
         self.camera_pose.height()
     }
 
-    /// The camera with `pitch` and `roll` (radians) added to its pose, as a calibration correction
-    /// puts it; `None` where that pose is impossible.
+    /// The frame's camera (of a robot standing at the robot-frame origin: it projects robot-frame
+    /// ground points) with `pitch` and `roll` (radians) added to its pose, as a calibration
+    /// correction puts it; `None` where that pose is impossible.
     pub fn corrected_camera(&self, pitch: f64, roll: f64) -> Option<Camera> {
-        let origin = FieldPose::new(0.0, 0.0, 0.0).expect("the origin is finite");
-        let pose = self.camera_pose.corrected(pitch, roll).ok()?;
-        Some(Camera::new(self.intrinsics, &origin, &pose))
+        robot_camera(self.intrinsics, &self.camera_pose, pitch, roll)
     }
 
     /// Pixels between neighbouring scan lines.
@@ -455,27 +448,13 @@ pub fn detect(
         });
     }
     let image = detect_in_image(frame)?;
-    let origin = FieldPose::new(0.0, 0.0, 0.0).expect("the origin is finite");
     let intrinsics = intrinsics.with_resolution(width, height);
-    let camera = Camera::new(intrinsics, &origin, camera_pose);
+    let turned = |pitch: f64, roll: f64| robot_camera(intrinsics, camera_pose, pitch, roll);
+    let camera = turned(0.0, 0.0).expect("the frame's own camera pose is valid");
     // The same camera a little more and a little less pitched, for the width gate.
-    let tilted: Vec<Camera> = [-PITCH_TOLERANCE, PITCH_TOLERANCE]
-        .iter()
-        .filter_map(|delta| {
-            let pose = CameraPose::new(
-                camera_pose.height(),
-                camera_pose.pitch() + delta,
-                camera_pose.roll(),
-                camera_pose.head_yaw(),
-            );
-            pose.ok().map(|pose| Camera::new(intrinsics, &origin, &pose))
-        })
-        .collect();
+    let tilted: Vec<Camera> =
+        [-PITCH_TOLERANCE, PITCH_TOLERANCE].iter().filter_map(|&delta| turned(delta, 0.0)).collect();
     // The camera turned a little each way in pitch and in roll, for each point's calibration rates.
-    let turned = |pitch: f64, roll: f64| {
-        let pose = camera_pose.corrected(pitch, roll).ok()?;
-        Some(Camera::new(intrinsics, &origin, &pose))
-    };
     let step = CALIBRATION_STEP;
     let turns = [(turned(step, 0.0), turned(-step, 0.0)), (turned(0.0, step), turned(0.0, -step))];
     let mut points: Vec<LinePoint> = image
@@ -504,7 +483,14 @@ pub fn detect(
         let stride = points.len() as f64 / MAX_POINTS as f64;
         points = (0..MAX_POINTS).map(|i| points[(i as f64 * stride) as usize]).collect();
     }
-    Ok(FramePercepts { points, camera, intrinsics, camera_pose: *camera_pose, image })
+    Ok(FramePercepts { points, intrinsics, camera_pose: *camera_pose, image })
+}
+
+/// The camera of a robot standing at the robot-frame origin, at `pose` turned by `pitch` and `roll`
+/// radians; `None` where that pose is impossible.
+fn robot_camera(intrinsics: CameraIntrinsics, pose: &CameraPose, pitch: f64, roll: f64) -> Option<Camera> {
+    let origin = FieldPose::new(0.0, 0.0, 0.0).expect("the origin is finite");
+    Some(Camera::new(intrinsics, &origin, &pose.corrected(pitch, roll).ok()?))
 }
 
 /// Whether a crossing's width on the ground under `camera` fits a painted line of `line_width`.
