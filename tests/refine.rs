@@ -11,7 +11,7 @@ use relocd::frame::{Frame, YuyvImage};
 use relocd::geometry::{Camera, CameraIntrinsics, CameraPose, FieldModel, FieldPose, PoseSigma, Symmetry};
 use relocd::pipeline::{GlobalSearch, Hypothesis, verify};
 use relocd::refine::line_map::Primitive;
-use relocd::refine::{FramePercepts, LineCheck, LineRefiner, PerceptError};
+use relocd::refine::{FramePercepts, Guess, LineCheck, LineRefiner, PerceptError};
 use relocd::sim::{Randomisation, SampledFrame, render};
 
 /// Seed of the frames rendered here: never used for training.
@@ -134,7 +134,7 @@ fn refinement_recovers_perturbed_poses() {
         )
         .unwrap();
         let mut estimate = hypotheses(&[(start, 1.0)], cnn_sigma());
-        verify(&refiner, std::slice::from_ref(&percepts), &mut estimate, GlobalSearch::Never);
+        verify(&refiner, std::slice::from_ref(&percepts), &mut estimate, &[], GlobalSearch::Never);
         let result = &estimate[0];
         let heading_error = (result.pose.heading() - truth.heading()).sin().abs().asin().to_degrees();
         if result.pose.distance_to(&truth) <= 0.05 && heading_error <= 1.0 {
@@ -171,7 +171,7 @@ fn lines_down_weight_a_contradicted_hypothesis_and_tie_point_twins() {
     // A wrong hypothesis: the mirror image, which sees the lines mirrored.
     let wrong = Symmetry::MirrorLongAxis.apply(&truth);
     let mut estimate = hypotheses(&[(truth, 0.3), (twin, 0.2), (wrong, 0.5)], cnn_sigma());
-    verify(&refiner, std::slice::from_ref(&percepts), &mut estimate, GlobalSearch::Never);
+    verify(&refiner, std::slice::from_ref(&percepts), &mut estimate, &[], GlobalSearch::Never);
     let find =
         |pose: &FieldPose| estimate.iter().find(|h| h.pose.distance_to(pose) < 0.2).expect("hypothesis kept");
     let (kept, kept_twin, contradicted) = (find(&truth), find(&twin), find(&wrong));
@@ -184,6 +184,53 @@ fn lines_down_weight_a_contradicted_hypothesis_and_tie_point_twins() {
     assert!(Symmetry::PointReflection.apply(&kept.pose).distance_to(&kept_twin.pose) < 1e-9);
     let total: f64 = estimate.iter().map(|h| h.weight).sum();
     assert!((total - 1.0).abs() < 1e-9);
+}
+
+#[test]
+fn a_prior_guess_near_the_truth_finds_the_place_a_lost_network_missed() {
+    let refiner = LineRefiner::new(&FieldModel::default()).with_camera_correction(false);
+    let (sampled, percepts) = (0..40)
+        .map(rendered)
+        .map(|(sampled, frame)| {
+            let percepts = percepts(&refiner, &sampled, &frame);
+            (sampled, percepts)
+        })
+        .find(|(sampled, percepts)| {
+            percepts.points.len() > 100 && sees_two_directions(&refiner, percepts, &sampled.pose)
+        })
+        .expect("a frame with lines");
+    let truth = sampled.pose;
+    let found = |estimate: &[Hypothesis]| {
+        estimate.iter().any(|h| {
+            [truth, Symmetry::PointReflection.apply(&truth)].iter().any(|pose| {
+                h.pose.distance_to(pose) <= 0.05
+                    && (h.pose.heading() - pose.heading()).sin().abs() <= 1f64.to_radians().sin()
+            })
+        })
+    };
+    // The network is lost: its twins sit at the mirror image, which the lines contradict.
+    let lost = Symmetry::MirrorLongAxis.apply(&truth);
+    let network = hypotheses(&[(lost, 0.5), (Symmetry::PointReflection.apply(&lost), 0.5)], cnn_sigma());
+    let mut alone = network.clone();
+    verify(&refiner, std::slice::from_ref(&percepts), &mut alone, &[], GlobalSearch::Never);
+    assert!(!found(&alone), "the lines alone should not reach the truth from {lost:?}: {alone:?}");
+    // The team's belief, 80 cm and 20° off, claiming half of that as its σ.
+    let belief = Guess {
+        pose: FieldPose::new(truth.x() + 0.6, truth.y() - 0.53, truth.heading() + 20f64.to_radians())
+            .unwrap(),
+        sigma: PoseSigma { x: 0.4, y: 0.4, theta: 10f64.to_radians() },
+    };
+    let mut helped = network.clone();
+    verify(&refiner, std::slice::from_ref(&percepts), &mut helped, &[belief], GlobalSearch::Never);
+    assert!(found(&helped), "{truth:?} not among {helped:?}");
+    let total: f64 = helped.iter().map(|h| h.weight).sum();
+    assert!((total - 1.0).abs() < 1e-9);
+    // A guess where the lines fit nothing adds nothing: the network's hypotheses stay the hypotheses.
+    let nowhere = Guess { pose: lost, sigma: PoseSigma { x: 0.05, y: 0.05, theta: 0.02 } };
+    let mut unhelped = network.clone();
+    verify(&refiner, std::slice::from_ref(&percepts), &mut unhelped, &[nowhere], GlobalSearch::Never);
+    assert_eq!(unhelped.len(), network.len());
+    assert_eq!(unhelped.iter().map(|h| h.lines.unwrap().places).collect::<Vec<_>>(), [None, None]);
 }
 
 #[test]
@@ -200,7 +247,7 @@ fn frames_without_lines_stay_unrefined() {
     for frame in [carpet, black, noise] {
         let percepts = refiner.percepts(&frame, &CameraIntrinsics::nao_top(), &camera).unwrap();
         let mut estimate = hypotheses(&[(pose, 1.0)], cnn_sigma());
-        verify(&refiner, std::slice::from_ref(&percepts), &mut estimate, GlobalSearch::Never);
+        verify(&refiner, std::slice::from_ref(&percepts), &mut estimate, &[], GlobalSearch::Never);
         let only = &estimate[0];
         assert_eq!(only.lines.unwrap().check, LineCheck::Unrefined);
         assert_eq!((only.pose, only.sigma), (pose, cnn_sigma()), "the network's hypothesis as it was");

@@ -271,7 +271,8 @@ impl Burst<'_> {
         };
         if let Some(refiner) = &self.pipeline.refiner {
             let verifying = Instant::now();
-            verify(refiner, &self.percepts, &mut estimate.hypotheses, self.pipeline.search);
+            let context = priors.guesses();
+            verify(refiner, &self.percepts, &mut estimate.hypotheses, &context, self.pipeline.search);
             self.times.lines_ms += verifying.elapsed().as_secs_f64() * 1e3;
         }
         if !priors.is_empty() {
@@ -287,7 +288,7 @@ impl Burst<'_> {
     fn lines_alone(&self, priors: &Priors) -> Result<Estimate, BurstError> {
         let mut hypotheses = Vec::new();
         if let Some(refiner) = &self.pipeline.refiner {
-            verify(refiner, &self.percepts, &mut hypotheses, GlobalSearch::Always);
+            verify(refiner, &self.percepts, &mut hypotheses, &priors.guesses(), GlobalSearch::Always);
         }
         if hypotheses.is_empty() {
             let points = self.percepts.iter().map(|frame| frame.points.len()).sum();
@@ -359,24 +360,30 @@ const MIN_NETWORK_SIGMA: (f64, f64) = (0.1, 0.05);
 /// Verifies and refines `hypotheses` against the line points of a burst's frames: each takes the fitted
 /// pose and σ where the lines support it, every one gets the lines' evidence, and the weights are
 /// scaled by the fits' quality (contradicted ones cut), renormalised and sorted heaviest first.
-/// Where `search` says so, the lines also look all over the field: if they fit any place, the
-/// hypotheses become those places and their point-symmetric twins, weighted by the fit's quality and
-/// by how likely the network's hypotheses make them (never below a floor), and marked `ambiguous` when
-/// there is more than one place.
+/// The lines also check the `context` guesses (the poses the burst's priors name), and where `search`
+/// says so they look all over the field: if a context guess or the search finds a place, the
+/// hypotheses become the places the lines fit and their point-symmetric twins, weighted by the fit's
+/// quality and by how likely the network's hypotheses make them (never below a floor), and marked
+/// `ambiguous` when there is more than one place.
 pub fn verify(
     refiner: &LineRefiner,
     percepts: &[FramePercepts],
     hypotheses: &mut Vec<Hypothesis>,
+    context: &[Guess],
     search: GlobalSearch,
 ) {
-    let guesses: Vec<Guess> = hypotheses.iter().map(|h| Guess { pose: h.pose, sigma: h.sigma }).collect();
-    let fits = match refiner.check(percepts, &guesses) {
+    let network = hypotheses.iter().map(|h| Guess { pose: h.pose, sigma: h.sigma });
+    let guesses: Vec<Guess> = network.chain(context.iter().copied()).collect();
+    let mut fits = match refiner.check(percepts, &guesses) {
         LineVerdict::TooFewPoints(evidence) => {
             hypotheses.iter_mut().for_each(|hypothesis| hypothesis.lines = Some(evidence));
             return;
         }
         LineVerdict::Checked(fits) => fits,
     };
+    let mut found: Vec<LineFit> = fits.split_off(hypotheses.len());
+    found.retain(|fit| fit.evidence.check != LineCheck::Contradicted);
+    found.extend(context.iter().flat_map(|guess| refiner.search_near(percepts, guess)));
     let heaviest = hypotheses
         .iter()
         .zip(&fits)
@@ -387,7 +394,10 @@ pub fn verify(
         GlobalSearch::WhenUnsure => heaviest != Some(LineCheck::Refined),
         GlobalSearch::Always => true,
     };
-    let places = if look { places(refiner, percepts, &fits) } else { Vec::new() };
+    if look {
+        found.extend(refiner.search(percepts));
+    }
+    let places = if look || !found.is_empty() { places(&fits, found) } else { Vec::new() };
     if places.is_empty() {
         for (hypothesis, fit) in hypotheses.iter_mut().zip(fits) {
             *hypothesis = Hypothesis {
@@ -417,12 +427,12 @@ pub fn verify(
     hypotheses.sort_by(|a, b| b.weight.total_cmp(&a.weight));
 }
 
-/// The places the lines fit: the network's hypotheses the lines supported and what the global search
-/// found, one per point-symmetric pair.
-fn places(refiner: &LineRefiner, percepts: &[FramePercepts], fits: &[LineFit]) -> Vec<LineFit> {
+/// The places the lines fit: the network's hypotheses the lines supported (`fits`) and the places
+/// `found` beyond them, one per point-symmetric pair.
+fn places(fits: &[LineFit], found: Vec<LineFit>) -> Vec<LineFit> {
     let mut places: Vec<LineFit> = Vec::new();
     let supported = fits.iter().filter(|fit| fit.evidence.check != LineCheck::Contradicted).copied();
-    for place in supported.chain(refiner.search(percepts)) {
+    for place in supported.chain(found) {
         if !places.iter().any(|known| same_place_or_twin(&known.pose, &place.pose)) {
             places.push(place);
         }

@@ -27,7 +27,7 @@ use crate::frame::Frame;
 use crate::geometry::angle::angle_distance;
 use crate::geometry::{CameraIntrinsics, CameraPose, FieldModel, FieldPose, PoseSigma, Symmetry};
 use optimise::{Observation, Prior, fit};
-use search::SearchMap;
+use search::{Region, SearchMap};
 
 /// Fewest line points a burst needs for refinement.
 pub const MIN_POINTS: usize = 12;
@@ -66,6 +66,8 @@ const SEARCH_CANDIDATES: usize = 10;
 /// Candidates whose points lie farther than this from the lines on average (metres, on the coarse
 /// grid) are not worth a fit.
 const SEARCH_MAX_MEAN_DISTANCE: f64 = 0.12;
+/// Widest reach of [`LineRefiner::search_near`] around its guess (metres, radians).
+const NEAR_REACH: (f64, f64) = (2.0, 1.0);
 /// Fits closer than this (metres, radians) are one place.
 const SAME_PLACE: (f64, f64) = (0.1, 0.035);
 
@@ -100,7 +102,7 @@ pub struct LineEvidence {
     /// `None` when too few lines were expected to tell.
     pub unseen_share: Option<f64>,
     /// How many places on the field (a point-symmetric pair counted once) the lines fit, when the
-    /// global search looked; `None` when it did not.
+    /// global search looked or a prior's guess found a place; `None` otherwise.
     pub places: Option<usize>,
 }
 
@@ -229,6 +231,28 @@ impl LineRefiner {
     /// point-symmetric pair (the caller adds the twins), best fit first: the coarse grid's best
     /// candidates ([`search`]), each fitted and checked as a guess would be. Empty with too few points.
     pub fn search(&self, frames: &[FramePercepts]) -> Vec<LineFit> {
+        self.search_within(frames, None)
+    }
+
+    /// The places the lines fit near `guess` (or its point-symmetric twin): [`LineRefiner::search`]
+    /// over the poses within twice the guess's σ (at least a grid step, at most [`NEAR_REACH`]), so
+    /// that a guess farther off than one fit can converge from still finds its place.
+    pub fn search_near(&self, frames: &[FramePercepts], guess: &Guess) -> Vec<LineFit> {
+        let (step, turn) = search::grid_spacing();
+        let reach = |sigma: f64, least: f64, most: f64| {
+            if sigma.is_finite() { (2.0 * sigma).clamp(least, most) } else { most }
+        };
+        let region = Region {
+            centre: guess.pose,
+            reach: reach(guess.sigma.x.max(guess.sigma.y), step, NEAR_REACH.0),
+            turn: reach(guess.sigma.theta, turn, NEAR_REACH.1),
+        };
+        self.search_within(frames, Some(&region))
+    }
+
+    /// The places the lines fit among the coarse grid's best candidates (all over the field, or in
+    /// `region`), best first, one per point-symmetric pair.
+    fn search_within(&self, frames: &[FramePercepts], region: Option<&Region>) -> Vec<LineFit> {
         let observations = observations(frames);
         if observations.len() < MIN_POINTS {
             return Vec::new();
@@ -237,7 +261,9 @@ impl LineRefiner {
         let sigma = PoseSigma { x: step, y: step, theta: turn };
         let mut places: Vec<LineFit> = Vec::new();
         let search = self.search.get_or_init(|| SearchMap::new(&self.field, &self.map));
-        for candidate in search.candidates(&observations, SEARCH_CANDIDATES, SEARCH_MAX_MEAN_DISTANCE) {
+        let candidates =
+            search.candidates(&observations, SEARCH_CANDIDATES, SEARCH_MAX_MEAN_DISTANCE, region);
+        for candidate in candidates {
             let fit = self.check_one(frames, &observations, &Guess { pose: candidate.pose, sigma });
             if fit.evidence.check == LineCheck::Contradicted
                 || places.iter().any(|place| same_place_or_twin(&place.pose, &fit.pose))

@@ -9,11 +9,14 @@
 //! that twin themselves. The grid's local minima are the candidates that the fine fit then refines and
 //! checks ([`super::LineRefiner::search`]).
 
+use std::ops::Range;
+
 use nalgebra::Point2;
 
 use super::line_map::LineMap;
 use super::optimise::Observation;
-use crate::geometry::{FieldModel, FieldPose};
+use crate::geometry::angle::angle_distance;
+use crate::geometry::{FieldModel, FieldPose, Symmetry};
 
 /// Cell size of the coarse map, metres.
 const CELL: f64 = 0.04;
@@ -41,6 +44,18 @@ pub struct Candidate {
     pub pose: FieldPose,
     /// Mean truncated distance of the scored points from the nearest line, metres.
     pub mean_distance: f64,
+}
+
+/// Poses near a guess: within `reach` metres of its position along x and y and `turn` radians of its
+/// heading, or as near its point-symmetric twin (which scores the same).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Region {
+    /// The guess.
+    pub centre: FieldPose,
+    /// Half the side of the square of positions, metres.
+    pub reach: f64,
+    /// Largest heading difference, radians.
+    pub turn: f64,
 }
 
 /// The field's lines as a coarse, padded map of truncated distances.
@@ -85,14 +100,16 @@ impl SearchMap {
         }
     }
 
-    /// The grid's local minima over positions and headings in [0, π), best first, at most `count`,
-    /// none whose points lie farther than `max_mean_distance` (metres) from the lines on average.
-    /// `observations` are robot-frame ground points (farther than [`REACH`] are left out).
+    /// The grid's local minima over positions and headings in [0, π) (all of them, or those in
+    /// `region`), best first, at most `count`, none whose points lie farther than `max_mean_distance`
+    /// (metres) from the lines on average. `observations` are robot-frame ground points (farther than
+    /// [`REACH`] are left out).
     pub fn candidates(
         &self,
         observations: &[Observation],
         count: usize,
         max_mean_distance: f64,
+        region: Option<&Region>,
     ) -> Vec<Candidate> {
         let points: Vec<Point2<f64>> = spread(observations);
         if points.is_empty() {
@@ -111,9 +128,10 @@ impl SearchMap {
             (PROBE_MARGIN * max_mean_distance.min(TRUNCATION) / TRUNCATION * 255.0 * probes as f64) as u32;
         let (width, height) = (self.positions.0 as usize, self.positions.1 as usize);
         let layer = width * height;
-        let mut scores = vec![0u32; HEADINGS * layer];
+        let mut scores = vec![u32::MAX; HEADINGS * layer];
         let mut offsets = vec![0isize; points.len()];
         for (heading_index, layer_scores) in scores.chunks_exact_mut(layer).enumerate() {
+            let Some((rows, columns)) = self.window(heading_index, region) else { continue };
             let (sin, cos) = heading(heading_index).sin_cos();
             for (offset, point) in offsets.iter_mut().zip(&points) {
                 let dx = ((cos * point.x - sin * point.y) / CELL).round() as isize;
@@ -121,9 +139,12 @@ impl SearchMap {
                 *offset = dy * self.columns as isize + dx;
             }
             let (probe_offsets, rest_offsets) = offsets.split_at(probes);
-            for (row, row_scores) in layer_scores.chunks_exact_mut(width).enumerate() {
+            for (row, row_scores) in
+                layer_scores.chunks_exact_mut(width).enumerate().take(rows.end).skip(rows.start)
+            {
                 let cell_y = self.first.1 as usize + row * POSITION_STEP as usize;
-                for (column, score) in row_scores.iter_mut().enumerate() {
+                for (column, score) in row_scores.iter_mut().enumerate().take(columns.end).skip(columns.start)
+                {
                     let cell_x = self.first.0 as usize + column * POSITION_STEP as usize;
                     let base = (cell_y * self.columns + cell_x) as isize;
                     // Every offset stays within the padding, so the index is in the map.
@@ -156,6 +177,28 @@ impl SearchMap {
             })
             .take_while(|candidate| candidate.mean_distance <= max_mean_distance)
             .collect()
+    }
+
+    /// The grid rows and columns to score at `heading_index`: all of them without a region; with one,
+    /// those around its centre or its twin, whichever the heading is near (`None`: neither).
+    fn window(&self, heading_index: usize, region: Option<&Region>) -> Option<(Range<usize>, Range<usize>)> {
+        let (width, height) = (self.positions.0 as usize, self.positions.1 as usize);
+        let Some(region) = region else { return Some((0..height, 0..width)) };
+        let twin = Symmetry::PointReflection.apply(&region.centre);
+        let grid_heading = heading(heading_index);
+        let centre = [region.centre, twin]
+            .into_iter()
+            .find(|pose| angle_distance(pose.heading(), grid_heading) <= region.turn)?;
+        let step = f64::from(POSITION_STEP) * CELL;
+        // `first` is the field coordinate of the first grid position along the axis.
+        let span = |position: f64, first: f64, count: usize| {
+            let low = ((position - region.reach - first) / step).ceil().max(0.0) as usize;
+            let high = (((position + region.reach - first) / step).floor() + 1.0).max(0.0) as usize;
+            low.min(count)..high.min(count)
+        };
+        let first = |origin: f64, cell: i32| origin + f64::from(cell) * CELL;
+        let rows = span(centre.y(), first(self.origin.y, self.first.1), height);
+        Some((rows, span(centre.x(), first(self.origin.x, self.first.0), width)))
     }
 }
 
@@ -211,7 +254,6 @@ fn is_local_minimum(scores: &[u32], index: usize, width: usize, height: usize) -
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::Symmetry;
     use crate::refine::optimise::observe_lines;
 
     /// Robot-frame points on the model's lines as seen from `truth` (ahead, within 3.5 m).
@@ -232,14 +274,13 @@ mod tests {
         ] {
             let observations = observe(&field, &truth);
             assert!(observations.len() > 20, "{}", observations.len());
-            let candidates = search.candidates(&observations, 10, 0.12);
+            let candidates = search.candidates(&observations, 10, 0.12, None);
             let twin = Symmetry::PointReflection.apply(&truth);
             let (step, turn) = grid_spacing();
             let found = candidates.iter().any(|candidate| {
                 [truth, twin].iter().any(|pose| {
                     candidate.pose.distance_to(pose) <= step
-                        && crate::geometry::angle::angle_distance(candidate.pose.heading(), pose.heading())
-                            <= turn
+                        && angle_distance(candidate.pose.heading(), pose.heading()) <= turn
                 })
             });
             assert!(found, "{truth:?} not in {candidates:?}");
@@ -247,16 +288,47 @@ mod tests {
     }
 
     #[test]
+    fn a_region_keeps_its_candidates_near_its_centre_or_twin_and_still_finds_the_truth() {
+        let field = FieldModel::default();
+        let search = SearchMap::new(&field, &LineMap::new(&field));
+        let truth = FieldPose::new(-2.1, 1.7, 2.6).unwrap();
+        let observations = observe(&field, &truth);
+        let centre = FieldPose::new(-1.6, 2.2, 2.3).unwrap();
+        let region = Region { centre, reach: 0.8, turn: 0.5 };
+        let candidates = search.candidates(&observations, 10, 0.12, Some(&region));
+        assert!(!candidates.is_empty());
+        let (step, turn) = grid_spacing();
+        let twin = Symmetry::PointReflection.apply(&centre);
+        for candidate in &candidates {
+            let inside = [centre, twin].iter().any(|pose| {
+                (candidate.pose.x() - pose.x()).abs() <= region.reach
+                    && (candidate.pose.y() - pose.y()).abs() <= region.reach
+                    && angle_distance(candidate.pose.heading(), pose.heading()) <= region.turn
+            });
+            assert!(inside, "{candidate:?} outside {region:?}");
+        }
+        let near = |pose: &FieldPose| {
+            candidates.iter().any(|c| {
+                c.pose.distance_to(pose) <= step && angle_distance(c.pose.heading(), pose.heading()) <= turn
+            })
+        };
+        assert!(near(&truth) || near(&Symmetry::PointReflection.apply(&truth)), "{candidates:?}");
+        let elsewhere = Region { centre: FieldPose::new(3.0, -2.5, 0.0).unwrap(), ..region };
+        let far = search.candidates(&observations, 10, 0.12, Some(&elsewhere));
+        assert!(far.iter().all(|c| c.pose.distance_to(&truth) > 1.0), "{far:?}");
+    }
+
+    #[test]
     fn no_points_no_candidates() {
         let field = FieldModel::default();
         let search = SearchMap::new(&field, &LineMap::new(&field));
-        assert!(search.candidates(&[], 10, 0.12).is_empty());
+        assert!(search.candidates(&[], 10, 0.12, None).is_empty());
         let far = [Observation {
             ground: Point2::new(9.0, 0.0),
             sigma: 0.02,
             calibration_rates: [nalgebra::Vector2::zeros(); 2],
         }];
-        assert!(search.candidates(&far, 10, 0.12).is_empty(), "points beyond reach are left out");
+        assert!(search.candidates(&far, 10, 0.12, None).is_empty(), "points beyond reach are left out");
     }
 
     #[test]

@@ -5,6 +5,7 @@
 use crate::geometry::angle::angle_distance;
 use crate::geometry::{FieldPose, PoseSigma};
 use crate::pipeline::Hypothesis;
+use crate::refine::Guess;
 
 /// How far a robot may have walked per second of the belief's age, metres.
 pub const DRIFT_M_PER_S: f64 = 0.3;
@@ -28,19 +29,34 @@ impl BeliefPrior {
         Self { pose, sigma, age_s }
     }
 
-    /// The likelihood of a hypothesis, up to a constant: the belief's Gaussian, its σ combined with the
-    /// hypothesis' own σ and the drift since the belief.
-    pub fn likelihood(&self, hypothesis: &Hypothesis) -> f64 {
+    /// Where the robot may be now: the belief's σ widened by how far it may have walked and turned
+    /// since the belief was held.
+    pub fn spread(&self) -> PoseSigma {
         let age = self.age_s.max(0.0);
-        let combine =
-            |belief: f64, own: f64, drift: f64| (belief * belief + own * own + drift * drift).sqrt();
-        let sx = combine(self.sigma.x, hypothesis.sigma.x, DRIFT_M_PER_S * age);
-        let sy = combine(self.sigma.y, hypothesis.sigma.y, DRIFT_M_PER_S * age);
-        let st = combine(self.sigma.theta, hypothesis.sigma.theta, TURN_RAD_PER_S * age);
+        let widen = |sigma: f64, drift: f64| sigma.hypot(drift * age);
+        PoseSigma {
+            x: widen(self.sigma.x, DRIFT_M_PER_S),
+            y: widen(self.sigma.y, DRIFT_M_PER_S),
+            theta: widen(self.sigma.theta, TURN_RAD_PER_S),
+        }
+    }
+
+    /// The belief as a guess for the field lines to check, as they check the network's hypotheses.
+    pub fn guess(&self) -> Guess {
+        Guess { pose: self.pose, sigma: self.spread() }
+    }
+
+    /// The log-likelihood of a hypothesis, up to a constant: the belief's Gaussian, its
+    /// [`spread`](Self::spread) combined with the hypothesis' own σ.
+    pub fn log_likelihood(&self, hypothesis: &Hypothesis) -> f64 {
+        let spread = self.spread();
+        let sx = spread.x.hypot(hypothesis.sigma.x);
+        let sy = spread.y.hypot(hypothesis.sigma.y);
+        let st = spread.theta.hypot(hypothesis.sigma.theta);
         let dx = (hypothesis.pose.x() - self.pose.x()) / sx;
         let dy = (hypothesis.pose.y() - self.pose.y()) / sy;
         let dt = angle_distance(hypothesis.pose.heading(), self.pose.heading()) / st;
-        (-0.5 * (dx * dx + dy * dy + dt * dt)).exp()
+        -0.5 * (dx * dx + dy * dy + dt * dt)
     }
 }
 
@@ -58,11 +74,10 @@ mod tests {
         let sigma = PoseSigma { x: 0.4, y: 0.4, theta: 0.3 };
         let fresh = BeliefPrior::new(FieldPose::new(-2.0, 1.0, 0.5).unwrap(), sigma, 0.0);
         let (near, twin) = (at(-1.7, 1.2, 0.6), at(1.7, -1.2, 0.6 - std::f64::consts::PI));
-        assert!(fresh.likelihood(&near) > 0.5);
-        assert!(fresh.likelihood(&twin) < 1e-20);
+        assert!(fresh.log_likelihood(&near) > 0.5f64.ln());
+        assert!(fresh.log_likelihood(&twin) < 1e-20f64.ln());
         let old = BeliefPrior { age_s: 10.0, ..fresh };
-        assert!(
-            old.likelihood(&twin) / old.likelihood(&near) > fresh.likelihood(&twin) / fresh.likelihood(&near)
-        );
+        let log_ratio = |prior: &BeliefPrior| prior.log_likelihood(&twin) - prior.log_likelihood(&near);
+        assert!(log_ratio(&old) > log_ratio(&fresh));
     }
 }

@@ -7,6 +7,11 @@
 //! combine as independent evidence (their product times the weight the network and the lines gave),
 //! and a floor keeps a wrong prior from making a right hypothesis vanish: no hypothesis ends below
 //! `min(its weight before the priors, min_share)`. All of it is pure maths over plain values.
+//!
+//! The priors that name poses (the belief, the placements) also hand them to the field lines as
+//! guesses ([`Priors::guesses`]), beside the network's hypotheses: where the network is lost but the
+//! robot is where the team believed, the lines find the place there. A guess the lines do not support
+//! adds nothing, so a prior still cannot put a hypothesis where the image does not.
 
 pub mod ball;
 pub mod belief;
@@ -22,13 +27,11 @@ pub use own_half::OwnHalfPrior;
 pub use placement::PlacementPrior;
 
 use super::Hypothesis;
+use crate::refine::Guess;
 
 /// Default floor: after the priors every hypothesis keeps at least this share of the weight (or the
 /// share it had before them, if that was less).
 pub const DEFAULT_MIN_SHARE: f64 = 0.1;
-
-/// A likelihood below this counts as this, so that priors that all say "no" leave a ratio to work with.
-const TINY: f64 = 1e-12;
 
 /// The context of one burst: which priors apply, and the floor.
 #[derive(Clone, Debug, PartialEq)]
@@ -119,25 +122,39 @@ impl Priors {
         self.placement.is_none() && self.belief.is_none() && self.own_half.is_none() && self.ball.is_none()
     }
 
-    /// Each set prior with its likelihood of every hypothesis, normalised so that the largest is 1.
+    /// The poses the context names, for the field lines to check: the belief (widened by its age) and
+    /// the placements.
+    pub fn guesses(&self) -> Vec<Guess> {
+        let belief = self.belief.iter().map(BeliefPrior::guess);
+        belief.chain(self.placement.iter().flat_map(PlacementPrior::guesses)).collect()
+    }
+
+    /// Each set prior with its likelihood of every hypothesis, relative to the likeliest (whose factor
+    /// is 1). Compared as logarithms, so that a prior far from every hypothesis still prefers the
+    /// nearest instead of underflowing to a tie; a prior that rules every hypothesis out says nothing.
     fn factors(&self, hypotheses: &[Hypothesis]) -> Vec<AppliedPrior> {
         let mut applied = Vec::new();
-        let mut add = |kind, likelihood: &dyn Fn(&Hypothesis) -> f64| {
-            let raw: Vec<f64> = hypotheses.iter().map(|h| likelihood(h).max(TINY)).collect();
-            let largest = raw.iter().copied().fold(TINY, f64::max);
-            applied.push(AppliedPrior { kind, factors: raw.iter().map(|l| l / largest).collect() });
+        let mut add = |kind, log_likelihood: &dyn Fn(&Hypothesis) -> f64| {
+            let raw: Vec<f64> = hypotheses
+                .iter()
+                .map(|h| Some(log_likelihood(h)).filter(|l| !l.is_nan()).unwrap_or(f64::NEG_INFINITY))
+                .collect();
+            let largest = raw.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            let factors =
+                raw.iter().map(|l| if largest.is_finite() { (l - largest).exp() } else { 1.0 }).collect();
+            applied.push(AppliedPrior { kind, factors });
         };
         if let Some(prior) = &self.placement {
-            add(PriorKind::PenaltyReturn, &|h| prior.likelihood(&h.pose));
+            add(PriorKind::PenaltyReturn, &|h| prior.likelihood(&h.pose).ln());
         }
         if let Some(prior) = &self.belief {
-            add(PriorKind::Belief, &|h| prior.likelihood(h));
+            add(PriorKind::Belief, &|h| prior.log_likelihood(h));
         }
         if let Some(prior) = &self.own_half {
-            add(PriorKind::OwnHalf, &|h| prior.likelihood(&h.pose));
+            add(PriorKind::OwnHalf, &|h| prior.likelihood(&h.pose).ln());
         }
         if let Some(prior) = &self.ball {
-            add(PriorKind::Ball, &|h| prior.likelihood(h));
+            add(PriorKind::Ball, &|h| prior.likelihood(h).ln());
         }
         applied
     }
@@ -258,6 +275,17 @@ mod tests {
         Priors { belief: Some(belief), ..Priors::default() }.apply(&mut hypotheses);
         let right = hypotheses.iter().find(|h| h.pose.distance_to(&truth) < 1e-9).unwrap();
         assert!((right.weight - DEFAULT_MIN_SHARE).abs() < 1e-12, "{}", right.weight);
+    }
+
+    #[test]
+    fn a_belief_far_from_both_twins_still_prefers_the_nearer() {
+        // Lines that locked onto a wrong place: both twins lie many σ from the belief, where the
+        // Gaussian itself underflows; the twin on the belief's side must still win.
+        let mut hypotheses = twins(pose(1.4, 2.1, -33.0), 0.5);
+        let belief = BeliefPrior::new(pose(0.0, 1.6, 57.0), PoseSigma { x: 0.05, y: 0.05, theta: 0.02 }, 0.0);
+        Priors { belief: Some(belief), ..Priors::default() }.apply(&mut hypotheses);
+        assert!(hypotheses[0].pose.x() > 0.0, "{hypotheses:?}");
+        assert!(hypotheses[0].weight > 0.85, "{}", hypotheses[0].weight);
     }
 
     #[test]

@@ -1,9 +1,11 @@
 //! The game-context prior: where the rules put a robot back after a penalty, used to re-weight the
-//! symmetric hypotheses the camera supports. It never moves or invents a pose; it only tells the
-//! symmetric twins apart, which the image alone cannot do on a symmetric field.
+//! symmetric hypotheses the camera supports. It never moves a pose and only tells the symmetric twins
+//! apart, which the image alone cannot do on a symmetric field; its placements are also guesses for
+//! the field lines, which add a hypothesis only where the lines support one.
 
-use crate::geometry::FieldPose;
 use crate::geometry::angle::angle_distance;
+use crate::geometry::{FieldPose, PoseSigma};
+use crate::refine::Guess;
 
 /// Where the rules place returning robots, and how far from it they may stand.
 #[derive(Clone, Debug, PartialEq)]
@@ -37,6 +39,12 @@ impl PlacementPrior {
             sigma_theta: 30f64.to_radians(),
             floor: 1e-3,
         }
+    }
+
+    /// Each placement as a guess for the field lines to check.
+    pub fn guesses(&self) -> impl Iterator<Item = Guess> + '_ {
+        let sigma = PoseSigma { x: self.sigma_x, y: self.sigma_y, theta: self.sigma_theta };
+        self.placements.iter().map(move |&pose| Guess { pose, sigma })
     }
 
     /// The prior's likelihood of a pose, up to a constant: the nearest placement's Gaussian, at least
