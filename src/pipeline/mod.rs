@@ -360,7 +360,8 @@ const MIN_NETWORK_SIGMA: (f64, f64) = (0.1, 0.05);
 /// Verifies and refines `hypotheses` against the line points of a burst's frames: each takes the fitted
 /// pose and σ where the lines support it, every one gets the lines' evidence, and the weights are
 /// scaled by the fits' quality (contradicted ones cut), renormalised and sorted heaviest first.
-/// The lines also check the `context` guesses (the poses the burst's priors name), and where `search`
+/// The lines also check the `context` guesses (the poses the burst's priors name) and search near them
+/// ([`LineRefiner::search_near`]), and where `search`
 /// says so they look all over the field: if a context guess or the search finds a place, the
 /// hypotheses become the places the lines fit and their point-symmetric twins, weighted by the fit's
 /// quality and by how likely the network's hypotheses make them (never below a floor), and marked
@@ -381,6 +382,8 @@ pub fn verify(
         }
         LineVerdict::Checked(fits) => fits,
     };
+    // Near a context guess the lines search even where they refine it: a place half a metre off may
+    // fit as well (the penalty area's lines), and then the burst is ambiguous.
     let mut found: Vec<LineFit> = fits.split_off(hypotheses.len());
     found.retain(|fit| fit.evidence.check != LineCheck::Contradicted);
     found.extend(context.iter().flat_map(|guess| refiner.search_near(percepts, guess)));
