@@ -81,6 +81,7 @@ fn stages(criterion: &mut Criterion) {
                 &refiner,
                 std::slice::from_ref(&percepts),
                 &mut one.clone(),
+                &[],
                 pipeline::GlobalSearch::Never,
             )
         })
