@@ -236,7 +236,29 @@ unsafe fn store_float_t<const MR: usize, const NR: usize, TC, TI>(
 }
 
 #[inline(never)]
-unsafe fn kernel<TI, const MR: usize, const NR: usize>(mut pnl: *const FusedKerSpec<TI>) -> isize
+unsafe fn kernel<TI, const MR: usize, const NR: usize>(pnl: *const FusedKerSpec<TI>) -> isize
+where
+    TI: LADatum + ScaleShiftAndRound + AsPrimitive<TI>,
+    TI: AsPrimitive<f16> + AsPrimitive<f32> + AsPrimitive<f64>,
+    usize: AsPrimitive<TI>,
+    f16: AsPrimitive<TI>,
+    f32: AsPrimitive<TI>,
+    f64: AsPrimitive<TI>,
+    i8: AsPrimitive<TI>,
+    i32: AsPrimitive<TI>,
+{
+    unsafe { fused_ops::<TI, MR, NR>(pnl, |_, _| false) }
+}
+
+/// The generic kernels' interpreter of a fused-op list over an `MR`x`NR` tile held in memory
+/// (`ab[row][col]`). A SIMD kernel keeping the same tile layout reuses it whole and only brings
+/// its matrix product: `simd_mat_mul` is offered every `AddMatMul` first, does the ones it can
+/// (answering true), and leaves the rest to the generic loops below.
+#[inline(always)]
+pub(crate) unsafe fn fused_ops<TI, const MR: usize, const NR: usize>(
+    mut pnl: *const FusedKerSpec<TI>,
+    mut simd_mat_mul: impl FnMut(&mut [[TI; NR]; MR], &FusedKerSpec<TI>) -> bool,
+) -> isize
 where
     TI: LADatum + ScaleShiftAndRound + AsPrimitive<TI>,
     TI: AsPrimitive<f16> + AsPrimitive<f32> + AsPrimitive<f64>,
@@ -327,6 +349,7 @@ where
                         }
                     }
                 }
+                ref spec @ FusedKerSpec::AddMatMul { .. } if simd_mat_mul(&mut ab, spec) => {}
                 FusedKerSpec::AddMatMul { k, pa, pb, packing } => {
                     use std::mem::transmute;
                     if TI::datum_type().is_float() {
