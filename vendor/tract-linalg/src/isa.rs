@@ -77,6 +77,8 @@ pub enum Isa {
     Aarch64Sme,
     Aarch64Sme2,
     Aarch64AppleAmx,
+    /// SSE4.1, the step below AVX every x86_64 Atom since Silvermont has; the SSE kernels' gate.
+    X86_64Sse41,
     X86_64Avx,
     X86_64Avx2,
     X86_64Fma,
@@ -100,7 +102,7 @@ pub enum Isa {
 }
 
 impl Isa {
-    pub const ALL: [Isa; 27] = [
+    pub const ALL: [Isa; 28] = [
         Isa::Arm,
         Isa::Aarch64,
         Isa::X86_64,
@@ -113,6 +115,7 @@ impl Isa {
         Isa::Aarch64Sme,
         Isa::Aarch64Sme2,
         Isa::Aarch64AppleAmx,
+        Isa::X86_64Sse41,
         Isa::X86_64Avx,
         Isa::X86_64Avx2,
         Isa::X86_64Fma,
@@ -145,6 +148,7 @@ impl Isa {
             Isa::Aarch64Sme => "sme",
             Isa::Aarch64Sme2 => "sme2",
             Isa::Aarch64AppleAmx => "apple-amx",
+            Isa::X86_64Sse41 => "sse4.1",
             Isa::X86_64Avx => "avx",
             Isa::X86_64Avx2 => "avx2",
             Isa::X86_64Fma => "fma",
@@ -184,6 +188,9 @@ impl Isa {
         match self {
             // The plain architecture is the floor every ladder rises from.
             Isa::Arm | Isa::Aarch64 | Isa::X86_64 | Isa::RiscV64 | Isa::Wasm32 => 0,
+            // SSE4.1 shares the floor: every AVX kernel outranks the SSE ones, and the arch key
+            // already puts them above portable Rust.
+            Isa::X86_64Sse41 => 0,
             // x86: each generation subsumes the last, AMX above the VNNI it needs alongside it.
             Isa::X86_64Avx => 1,
             Isa::X86_64Avx2 | Isa::X86_64Fma | Isa::X86_64F16c => 2,
@@ -231,6 +238,7 @@ impl Isa {
             | Isa::Aarch64Sme2
             | Isa::Aarch64AppleAmx => Arch::Aarch64,
             Isa::X86_64
+            | Isa::X86_64Sse41
             | Isa::X86_64Avx
             | Isa::X86_64Avx2
             | Isa::X86_64Fma

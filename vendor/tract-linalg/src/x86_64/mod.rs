@@ -86,6 +86,7 @@ macro_rules! cpu_feature {
     };
 }
 
+cpu_feature!(SSE41 = "sse4.1");
 cpu_feature!(AVX = "avx");
 cpu_feature!(AVX2 = "avx2");
 cpu_feature!(FMA = "fma");
@@ -120,6 +121,7 @@ pub fn isa_set() -> crate::isa::IsaSet {
     use crate::isa::{Isa, IsaSet};
     let mut set = IsaSet::of_arch(crate::isa::Arch::X86_64);
     for (isa, probe) in [
+        (Isa::X86_64Sse41, SSE41),
         (Isa::X86_64Avx, AVX),
         (Isa::X86_64Avx2, AVX2),
         (Isa::X86_64Fma, FMA),

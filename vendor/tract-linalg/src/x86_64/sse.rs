@@ -6,10 +6,12 @@
 //! (`ab[row][col]`, so every fused op other than the product itself is the generic code, through
 //! [`crate::generic::mmm::fused_ops`]) and replace only the `AddMatMul` loop, which is where the
 //! time goes: the tile is loaded into xmm registers once per product, one register per 4 columns
-//! of a row, and every step of `k` is a broadcast, a `mulps` and an `addps` per register. SSE2
-//! is baseline on x86_64, so the f32 kernel runs on every x86_64 CPU; it declares no instruction
-//! set and sits at the bottom of the ladder, under every AVX kernel, so it is only chosen where
-//! none of those can run.
+//! of a row, and every step of `k` is a broadcast, a `mulps` and an `addps` per register (the i32
+//! kernel: a `pmaddwd` per row for two steps of `k`). SSE2 is baseline on x86_64 and is all the
+//! f32 kernel uses; both are declared as needing SSE4.1 (the i32 kernel's `pmovsxbw`; every Atom
+//! since Silvermont has it) so that one `TRACT_CPU_ISA=-sse4.1` turns the pair off, and they sit
+//! at the bottom of the ladder, under every AVX kernel: they are only chosen where none of those
+//! can run.
 use crate::frame::mmm::FusedKerSpec;
 
 /// `MR`x`NR` f32 tile, `NR = 4 * NV` columns as `NV` xmm registers per row. `MR` must be a
@@ -98,7 +100,86 @@ unsafe fn splat(x: std::arch::x86_64::__m128, lane: usize) -> std::arch::x86_64:
     }
 }
 
-MMMRustKernel!(x86_64; sse_kernel_f32::<8, 4, 1> => sse_mmm_f32_8x4<f32>(8, 4));
+/// 8x4 i32 tile over i8 panels, exact: each step of two `k` interleaves the two A columns and
+/// the two B rows byte by byte, sign-extends them to i16 (`pmovsxbw`, SSE4.1) and lets one
+/// `pmaddwd` per row do 4 columns x 2 products, summed in i32. (`pmaddubsw` would do twice the
+/// products per instruction but saturates its i16 pair sums, so it would not match the other
+/// kernels bit for bit.)
+///
+/// # Safety
+/// `pnl` is a fused-op list as the frame builds them; the CPU must have SSE4.1.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "sse4.1")]
+pub(crate) unsafe fn sse_kernel_i32_8x4(pnl: *const FusedKerSpec<i32>) -> isize {
+    unsafe {
+        crate::generic::mmm::fused_ops::<i32, 8, 4>(pnl, |ab, spec| match *spec {
+            FusedKerSpec::AddMatMul { k, pa, pb, packing: 1 } => {
+                add_mat_mul_i8_8x4(ab, k, pa as *const i8, pb as *const i8);
+                true
+            }
+            _ => false,
+        })
+    }
+}
+
+#[cfg(not(target_arch = "x86_64"))]
+pub(crate) unsafe fn sse_kernel_i32_8x4(_pnl: *const FusedKerSpec<i32>) -> isize {
+    panic!("sse kernels are not built for this target arch")
+}
+
+/// `ab += A * B` over `k` steps of packed i8 panels: A holds 8 i8 per step, B 4.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "sse4.1")]
+unsafe fn add_mat_mul_i8_8x4(ab: &mut [[i32; 4]; 8], k: usize, pa: *const i8, pb: *const i8) {
+    use std::arch::x86_64::*;
+    unsafe {
+        let mut acc = [_mm_setzero_si128(); 8];
+        for (row, acc) in ab.iter().zip(acc.iter_mut()) {
+            *acc = _mm_loadu_si128(row.as_ptr() as *const __m128i);
+        }
+        // One step of two `k` (the second all zeros past an odd `k`).
+        let step = |acc: &mut [__m128i; 8], a0: __m128i, a1: __m128i, b0: __m128i, b1: __m128i| {
+            // Row r's pair (A[r][k], A[r][k+1]) as two i16, rows 0-3 and 4-7.
+            let a = _mm_unpacklo_epi8(a0, a1);
+            let a_lo = _mm_cvtepi8_epi16(a);
+            let a_hi = _mm_cvtepi8_epi16(_mm_unpackhi_epi64(a, a));
+            // Column c's pair (B[k][c], B[k+1][c]) as two i16, columns 0-3.
+            let b = _mm_cvtepi8_epi16(_mm_unpacklo_epi8(b0, b1));
+            macro_rules! row {
+                ($r:expr, $a:expr, $lane:expr) => {
+                    acc[$r] = _mm_add_epi32(acc[$r], _mm_madd_epi16(_mm_shuffle_epi32::<$lane>($a), b))
+                };
+            }
+            row!(0, a_lo, 0x00);
+            row!(1, a_lo, 0x55);
+            row!(2, a_lo, 0xaa);
+            row!(3, a_lo, 0xff);
+            row!(4, a_hi, 0x00);
+            row!(5, a_hi, 0x55);
+            row!(6, a_hi, 0xaa);
+            row!(7, a_hi, 0xff);
+        };
+        let a8 = |ik: usize| _mm_loadl_epi64(pa.add(8 * ik) as *const __m128i);
+        let b4 = |ik: usize| _mm_cvtsi32_si128((pb.add(4 * ik) as *const i32).read_unaligned());
+        for pair in 0..k / 2 {
+            step(&mut acc, a8(2 * pair), a8(2 * pair + 1), b4(2 * pair), b4(2 * pair + 1));
+        }
+        if k % 2 == 1 {
+            let zero = _mm_setzero_si128();
+            step(&mut acc, a8(k - 1), zero, b4(k - 1), zero);
+        }
+        for (row, acc) in ab.iter_mut().zip(acc.iter()) {
+            _mm_storeu_si128(row.as_mut_ptr() as *mut __m128i, *acc);
+        }
+    }
+}
+
+MMMRustKernel!(x86_64; sse_kernel_f32::<8, 4, 1> => sse_mmm_f32_8x4<f32>(8, 4) isa(X86_64Sse41));
+
+MMMRustKernel! { x86_64; sse_kernel_i32_8x4 => sse_mmm_i32_8x4<i32>(8, 4) isa(X86_64Sse41)
+    packing[1] = i8i8 => |k| k.with_packing(i8::packing(8), i8::packing(4));
+    store(i8)
+}
 
 #[cfg(all(test, target_arch = "x86_64"))]
 mod tests {
@@ -106,30 +187,46 @@ mod tests {
     use crate::mmm::Query;
     use tract_data::prelude::DatumType;
 
-    fn picked(isa: IsaSet, m: usize, k: usize, n: usize) -> String {
-        let query = Query::plain(DatumType::F32, Some(m), Some(k), Some(n));
+    fn picked(isa: IsaSet, acc: DatumType, m: usize, k: usize, n: usize) -> String {
+        let query = Query::plain(acc, Some(m), Some(k), Some(n));
         crate::MmmDispatch::for_isa(isa).pick(&query).unwrap().0.name().to_string()
     }
 
-    /// An x86_64 CPU without AVX (what `TRACT_CPU_ISA=-avx,-avx2,-fma,...` leaves of this host)
-    /// gets the SSE kernel instead of the generic one, at a convolution's shape and a matvec's.
-    #[test]
-    fn chosen_without_avx() {
-        let sse2 = IsaSet::of_arch(Arch::X86_64);
-        assert_eq!(picked(sse2, 64, 576, 4800), "sse_mmm_f32_8x4");
-        assert_eq!(picked(sse2, 64, 576, 1), "sse_mmm_f32_8x4");
+    /// What an Atom E3845 offers (and `TRACT_CPU_ISA=-avx,-avx2,-fma,...` leaves of this host).
+    fn atom() -> IsaSet {
+        IsaSet::of_arch(Arch::X86_64).with(Isa::X86_64Sse41)
     }
 
-    /// It never displaces a kernel written for AVX.
+    /// Without AVX the SSE kernels replace the generic ones, at a convolution's shape and a
+    /// matvec's, for f32 and for int8.
+    #[test]
+    fn chosen_without_avx() {
+        for n in [4800, 1] {
+            assert_eq!(picked(atom(), DatumType::F32, 64, 576, n), "sse_mmm_f32_8x4");
+            assert_eq!(picked(atom(), DatumType::I32, 64, 576, n), "sse_mmm_i32_8x4");
+        }
+    }
+
+    /// `-sse4.1` brings the generic kernels back.
+    #[test]
+    fn not_chosen_without_sse41() {
+        let sse2 = IsaSet::of_arch(Arch::X86_64);
+        assert!(picked(sse2, DatumType::F32, 64, 576, 4800).starts_with("generic"));
+        assert!(picked(sse2, DatumType::I32, 64, 576, 4800).starts_with("generic"));
+    }
+
+    /// They never displace a kernel written for AVX.
     #[test]
     fn not_chosen_with_avx() {
         for isa in [
-            IsaSet::of_arch(Arch::X86_64).with(Isa::X86_64Avx),
+            atom().with(Isa::X86_64Avx),
             IsaSet::ladder(Arch::X86_64, 2),
             IsaSet::ladder(Arch::X86_64, 3),
         ] {
-            assert!(!picked(isa, 64, 576, 4800).starts_with("sse"), "{isa:?}");
-            assert!(!picked(isa, 64, 576, 1).starts_with("sse"), "{isa:?}");
+            for n in [4800, 1] {
+                assert!(!picked(isa, DatumType::F32, 64, 576, n).starts_with("sse"), "{isa:?}");
+            }
+            assert!(!picked(isa, DatumType::I32, 64, 576, 4800).starts_with("sse"), "{isa:?}");
         }
     }
 }
