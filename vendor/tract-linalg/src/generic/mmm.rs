@@ -251,13 +251,13 @@ where
 }
 
 /// The generic kernels' interpreter of a fused-op list over an `MR`x`NR` tile held in memory
-/// (`ab[row][col]`). A SIMD kernel keeping the same tile layout reuses it whole and only brings
-/// its matrix product: `simd_mat_mul` is offered every `AddMatMul` first, does the ones it can
-/// (answering true), and leaves the rest to the generic loops below.
+/// (`ab[row][col]`). A SIMD kernel keeping the same tile layout reuses it and brings only the ops
+/// that matter to it (the matrix product, the store): `simd_op` is offered every op first, does
+/// the ones it can (answering true), and leaves the rest to the generic code below.
 #[inline(always)]
 pub(crate) unsafe fn fused_ops<TI, const MR: usize, const NR: usize>(
     mut pnl: *const FusedKerSpec<TI>,
-    mut simd_mat_mul: impl FnMut(&mut [[TI; NR]; MR], &FusedKerSpec<TI>) -> bool,
+    mut simd_op: impl FnMut(&mut [[TI; NR]; MR], &FusedKerSpec<TI>) -> bool,
 ) -> isize
 where
     TI: LADatum + ScaleShiftAndRound + AsPrimitive<TI>,
@@ -277,6 +277,7 @@ where
             }
             match *pnl {
                 FusedKerSpec::Done => break,
+                ref spec if simd_op(&mut ab, spec) => {}
                 FusedKerSpec::Clear => ab = std::mem::zeroed(),
                 FusedKerSpec::LoadTile(col_major, _row_major) => {
                     for row in 0..MR {
@@ -349,7 +350,6 @@ where
                         }
                     }
                 }
-                ref spec @ FusedKerSpec::AddMatMul { .. } if simd_mat_mul(&mut ab, spec) => {}
                 FusedKerSpec::AddMatMul { k, pa, pb, packing } => {
                     use std::mem::transmute;
                     if TI::datum_type().is_float() {

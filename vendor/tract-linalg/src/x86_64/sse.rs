@@ -29,6 +29,10 @@ pub(crate) unsafe fn sse_kernel_f32<const MR: usize, const NR: usize, const NV: 
                 add_mat_mul_f32::<MR, NR, NV>(ab, k, pa as *const f32, pb as *const f32);
                 true
             }
+            FusedKerSpec::Store(tile) if tile.item_size == 4 && tile.col_byte_stride == 4 => {
+                store_rows(ab, &tile);
+                true
+            }
             _ => false,
         })
     }
@@ -39,6 +43,22 @@ pub(crate) unsafe fn sse_kernel_f32<const MR: usize, const NR: usize, const NV: 
     _pnl: *const FusedKerSpec<f32>,
 ) -> isize {
     panic!("sse kernels are not built for this target arch")
+}
+
+/// Stores a tile whose rows are contiguous in C (a convolution's output: channels by pixels) a
+/// whole row at a time; the generic store goes element by element, for any strides.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+unsafe fn store_rows<T: Copy, const MR: usize, const NR: usize>(
+    ab: &[[T; NR]; MR],
+    tile: &crate::frame::mmm::OutputStoreKer,
+) {
+    for (i, row) in ab.iter().enumerate() {
+        unsafe {
+            let dst = tile.ptr.offset(tile.row_byte_stride * i as isize) as *mut T;
+            std::ptr::copy_nonoverlapping(row.as_ptr(), dst, NR);
+        }
+    }
 }
 
 /// `ab += A * B` over `k` steps of packed panels: A holds `MR` f32 per step, B `NR`.
@@ -117,6 +137,15 @@ pub(crate) unsafe fn sse_kernel_i32_8x4(pnl: *const FusedKerSpec<i32>) -> isize 
                 add_mat_mul_i8_8x4(ab, k, pa as *const i8, pb as *const i8);
                 true
             }
+            FusedKerSpec::QScale(shift, policy, mult) => q_scale_rows(ab, shift, policy, mult),
+            FusedKerSpec::Store(tile) if tile.item_size == 4 && tile.col_byte_stride == 4 => {
+                store_rows(ab, &tile);
+                true
+            }
+            FusedKerSpec::Store(tile) if tile.item_size == 1 && tile.col_byte_stride == 1 => {
+                store_rows_i8(ab, &tile);
+                true
+            }
             _ => false,
         })
     }
@@ -174,6 +203,98 @@ unsafe fn add_mat_mul_i8_8x4(ab: &mut [[i32; 4]; 8], k: usize, pa: *const i8, pb
     }
 }
 
+/// The re-quantisation of a tile, `ab[r][c].q_scale(Scaler::from_fuse_params(shift, policy,
+/// mult))`, four columns at a time and exactly: the product with `mult` in 64 bits
+/// (`pmuludq` on the magnitudes), the policy's nudge, the shift, the sign back (`psignd`).
+/// Answers false, leaving it to the generic code, where the vector form does not hold: a negative
+/// multiplier, a shift out of 1..=62 bits, or the `Native` policy.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "sse4.1")]
+unsafe fn q_scale_rows(
+    ab: &mut [[i32; 4]; 8],
+    shift: isize,
+    policy: crate::frame::mmm::RoundingPolicy,
+    mult: i32,
+) -> bool {
+    use crate::frame::mmm::RoundingPolicy::*;
+    let bits = shift + 31;
+    if mult < 0 || !(1..=62).contains(&bits) || policy == Native {
+        return false;
+    }
+    for row in ab.iter_mut() {
+        unsafe {
+            let x = std::arch::x86_64::_mm_loadu_si128(row.as_ptr() as _);
+            let y = q_scale_x4(x, mult as u32, bits as u32, policy);
+            std::arch::x86_64::_mm_storeu_si128(row.as_mut_ptr() as _, y);
+        }
+    }
+    true
+}
+
+/// Four lanes of `Scaler * i32` for a non-negative `mult` and `bits = shift + 31` in 1..=62:
+/// `sign(x) * ((|x| * mult + half + nudge) >> bits)`, truncated to i32, with `half = 1 << (bits -
+/// 1)` and the policy's nudge (`generic/rounding.rs`).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "sse4.1")]
+unsafe fn q_scale_x4(
+    x: std::arch::x86_64::__m128i,
+    mult: u32,
+    bits: u32,
+    policy: crate::frame::mmm::RoundingPolicy,
+) -> std::arch::x86_64::__m128i {
+    use crate::frame::mmm::RoundingPolicy::*;
+    use std::arch::x86_64::*;
+    let magnitude = _mm_abs_epi32(x); // |i32::MIN| reads right as u32
+    let mult = _mm_set1_epi32(mult as i32);
+    let count = _mm_cvtsi32_si128(bits as i32);
+    let half_minus_one = _mm_set1_epi64x((1i64 << (bits - 1)) - 1);
+    let one = _mm_set1_epi64x(1);
+    // x < 0 and x > 0 as 0 or 1 in 64-bit lanes: the even 32-bit lanes, then the odd ones.
+    let negative = _mm_cmplt_epi32(x, _mm_setzero_si128());
+    let positive = _mm_cmpgt_epi32(x, _mm_setzero_si128());
+    let (negative_even, positive_even) =
+        (_mm_and_si128(negative, one), _mm_and_si128(positive, one));
+    let (negative_odd, positive_odd) = (
+        _mm_and_si128(_mm_srli_epi64::<32>(negative), one),
+        _mm_and_si128(_mm_srli_epi64::<32>(positive), one),
+    );
+    // Half of the lanes: `value` holds two magnitudes times `mult` in 64 bits.
+    let round = |value: __m128i, negative: __m128i, positive: __m128i| {
+        let add = match policy {
+            Zero => half_minus_one,
+            Away => _mm_add_epi64(half_minus_one, one),
+            MinusInf => _mm_add_epi64(half_minus_one, negative),
+            PlusInf => _mm_add_epi64(half_minus_one, positive),
+            Even => _mm_add_epi64(half_minus_one, _mm_and_si128(_mm_srl_epi64(value, count), one)),
+            _ => _mm_sub_epi64(
+                _mm_add_epi64(half_minus_one, one),
+                _mm_and_si128(_mm_srl_epi64(value, count), one),
+            ),
+        };
+        _mm_srl_epi64(_mm_add_epi64(value, add), count)
+    };
+    let even = round(_mm_mul_epu32(magnitude, mult), negative_even, positive_even);
+    let odd =
+        round(_mm_mul_epu32(_mm_srli_epi64::<32>(magnitude), mult), negative_odd, positive_odd);
+    let scaled = _mm_blend_epi16::<0b1100_1100>(even, _mm_slli_epi64::<32>(odd));
+    _mm_sign_epi32(scaled, x)
+}
+
+/// Stores an i8 tile whose rows are contiguous in C: each row's four low bytes in one go.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "sse4.1")]
+unsafe fn store_rows_i8(ab: &[[i32; 4]; 8], tile: &crate::frame::mmm::OutputStoreKer) {
+    use std::arch::x86_64::*;
+    let low_bytes = _mm_setr_epi8(0, 4, 8, 12, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1);
+    for (i, row) in ab.iter().enumerate() {
+        unsafe {
+            let packed = _mm_shuffle_epi8(_mm_loadu_si128(row.as_ptr() as _), low_bytes);
+            let dst = tile.ptr.offset(tile.row_byte_stride * i as isize) as *mut i32;
+            dst.write_unaligned(_mm_cvtsi128_si32(packed));
+        }
+    }
+}
+
 MMMRustKernel!(x86_64; sse_kernel_f32::<8, 4, 1> => sse_mmm_f32_8x4<f32>(8, 4) isa(X86_64Sse41));
 
 MMMRustKernel! { x86_64; sse_kernel_i32_8x4 => sse_mmm_i32_8x4<i32>(8, 4) isa(X86_64Sse41)
@@ -213,6 +334,40 @@ mod tests {
         let sse2 = IsaSet::of_arch(Arch::X86_64);
         assert!(picked(sse2, DatumType::F32, 64, 576, 4800).starts_with("generic"));
         assert!(picked(sse2, DatumType::I32, 64, 576, 4800).starts_with("generic"));
+    }
+
+    /// The vector re-quantisation is the scalar one, bit for bit, over the whole i32 range.
+    #[test]
+    fn q_scale_matches_the_scalar_one() {
+        use crate::frame::mmm::RoundingPolicy::*;
+        use crate::generic::rounding::{ScaleShiftAndRound, Scaler};
+        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        let mut next = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            seed
+        };
+        let edges = [0, 1, -1, 2, -2, i32::MAX, i32::MIN, i32::MIN + 1, 1 << 30, -(1 << 30)];
+        for round in 0..20_000 {
+            let policy = [Zero, Away, MinusInf, PlusInf, Even, Odd][round % 6];
+            let mult = match round % 4 {
+                0 => (next() as u32 >> 1) as i32,
+                1 => i32::MAX,
+                2 => 1 << 30,
+                _ => (next() % 1000) as i32,
+            };
+            let shift = (next() % 62) as isize - 30; // bits = shift + 31 in 1..=62
+            let mut ab = [[0i32; 4]; 8];
+            for (ix, v) in ab.iter_mut().flatten().enumerate() {
+                *v = if ix < edges.len() { edges[ix] } else { next() as i32 >> (next() % 31) };
+            }
+            let expected = ab.map(|row| {
+                row.map(|v| v.q_scale(Scaler::from_fuse_params(shift, policy, mult)))
+            });
+            assert!(unsafe { super::q_scale_rows(&mut ab, shift, policy, mult) });
+            assert_eq!(ab, expected, "mult {mult} shift {shift} {policy:?}");
+        }
     }
 
     /// They never displace a kernel written for AVX.
