@@ -14,8 +14,9 @@ use super::decode::RawOutput;
 use super::preprocess::InputTensor;
 use crate::geometry::Representation;
 
-/// The instruction sets tract's kernels may use on this machine, after `TRACT_CPU_ISA`: `x86_64`
-/// alone means the generic kernels an Atom without AVX gets; `x86_64,avx,avx2,fma,…` the fast ones;
+/// The instruction sets tract's kernels may use on this machine, after `TRACT_CPU_ISA`:
+/// `x86_64,sse4.1` means the SSE kernels an Atom without AVX gets (the patched tract-linalg in
+/// `vendor/`), `x86_64` alone the generic ones; `x86_64,sse4.1,avx,avx2,fma,…` the fast ones;
 /// `generic` where tract has no kernels of its own (32-bit x86, the Nao V5).
 pub fn kernel_isa() -> String {
     let isa = tract_onnx::tract_core::tract_linalg::isa::native();

@@ -52,27 +52,48 @@ pub fn preprocess(frame: &Frame, spec: &InputSpec) -> Result<InputTensor, Prepro
     let gains: [f32; 3] = std::array::from_fn(|c| spec.scale / spec.std[c]);
     let offsets: [f32; 3] = std::array::from_fn(|c| spec.mean[c] / spec.std[c]);
     let count = (factor * factor) as f32;
+    // Per input pixel of the current row: the sums of its camera pixels' three channels.
+    let mut sums = vec![[0u32; 3]; input_width];
     for row in 0..input_height {
-        for column in 0..input_width {
-            let rgb = match frame {
-                Frame::Rgb(image) => {
-                    let raw = image.as_raw();
-                    let mut sum = [0u32; 3];
-                    for y in row * factor..(row + 1) * factor {
-                        let start = (y * fw + column * factor) * 3;
-                        for pixel in raw[start..start + factor * 3].chunks_exact(3) {
+        sums.fill([0; 3]);
+        let lines = row * factor..(row + 1) * factor;
+        match frame {
+            Frame::Rgb(image) => {
+                let raw = image.as_raw();
+                for y in lines {
+                    let line = &raw[y * fw * 3..(y + 1) * fw * 3];
+                    for (sum, block) in sums.iter_mut().zip(line.chunks_exact(factor * 3)) {
+                        for pixel in block.chunks_exact(3) {
                             for channel in 0..3 {
                                 sum[channel] += pixel[channel] as u32;
                             }
                         }
                     }
-                    sum.map(|total| total as f32 / count)
                 }
-                Frame::Yuyv(image) => {
-                    let raw = image.as_bytes();
-                    let mut sum = [0u32; 3];
-                    for y in row * factor..(row + 1) * factor {
-                        let line = &raw[y * fw * 2..(y + 1) * fw * 2];
+            }
+            // An even block holds whole Y0 U Y1 V pairs: each U and V counts for both pixels.
+            Frame::Yuyv(image) if factor % 2 == 0 => {
+                let raw = image.as_bytes();
+                for y in lines {
+                    let line = &raw[y * fw * 2..(y + 1) * fw * 2];
+                    for (sum, block) in sums.iter_mut().zip(line.chunks_exact(factor * 2)) {
+                        let (mut luma, mut u, mut v) = (0u32, 0u32, 0u32);
+                        for pair in block.chunks_exact(4) {
+                            luma += pair[0] as u32 + pair[2] as u32;
+                            u += pair[1] as u32;
+                            v += pair[3] as u32;
+                        }
+                        sum[0] += luma;
+                        sum[1] += 2 * u;
+                        sum[2] += 2 * v;
+                    }
+                }
+            }
+            Frame::Yuyv(image) => {
+                let raw = image.as_bytes();
+                for y in lines {
+                    let line = &raw[y * fw * 2..(y + 1) * fw * 2];
+                    for (column, sum) in sums.iter_mut().enumerate() {
                         for x in column * factor..(column + 1) * factor {
                             let pair = (x / 2) * 4;
                             sum[0] += line[x * 2] as u32;
@@ -80,9 +101,14 @@ pub fn preprocess(frame: &Frame, spec: &InputSpec) -> Result<InputTensor, Prepro
                             sum[2] += line[pair + 3] as u32;
                         }
                     }
-                    let [y, u, v] = sum.map(|total| total as f32 / count);
-                    yuv_to_rgb_f32(y, u, v)
                 }
+            }
+        }
+        for (column, sum) in sums.iter().enumerate() {
+            let mean = sum.map(|total| total as f32 / count);
+            let rgb = match frame {
+                Frame::Rgb(_) => mean,
+                Frame::Yuyv(_) => yuv_to_rgb_f32(mean[0], mean[1], mean[2]),
             };
             let index = row * input_width + column;
             for channel in 0..3 {
@@ -135,6 +161,50 @@ mod tests {
         let from_yuyv = preprocess(&Frame::Yuyv(yuyv), &spec(4, 3)).unwrap();
         for (a, b) in from_rgb.data.iter().zip(&from_yuyv.data) {
             assert!((a - b).abs() < 0.02, "{a} vs {b}");
+        }
+    }
+
+    /// The per-pixel walk the pair sums replaced, as the reference: every camera pixel adds its
+    /// own Y and its pair's U and V.
+    fn yuyv_reference(image: &YuyvImage, spec: &InputSpec) -> Vec<f32> {
+        let (width, height) = spec.image_size();
+        let fw = image.width() as usize;
+        let factor = fw / width;
+        let raw = image.as_bytes();
+        let count = (factor * factor) as f32;
+        let mut data = vec![0.0; 3 * width * height];
+        for row in 0..height {
+            for column in 0..width {
+                let mut sum = [0u32; 3];
+                for y in row * factor..(row + 1) * factor {
+                    for x in column * factor..(column + 1) * factor {
+                        let pair = y * fw * 2 + (x / 2) * 4;
+                        sum[0] += raw[y * fw * 2 + x * 2] as u32;
+                        sum[1] += raw[pair + 1] as u32;
+                        sum[2] += raw[pair + 3] as u32;
+                    }
+                }
+                let [y, u, v] = sum.map(|total| total as f32 / count);
+                let rgb = yuv_to_rgb_f32(y, u, v);
+                for channel in 0..3 {
+                    data[channel * width * height + row * width + column] = rgb[channel]
+                        * (spec.scale / spec.std[channel])
+                        - spec.mean[channel] / spec.std[channel];
+                }
+            }
+        }
+        data
+    }
+
+    #[test]
+    fn yuyv_pair_sums_match_the_per_pixel_walk_exactly() {
+        let bytes: Vec<u8> =
+            (0u32..24 * 12 * 2).map(|i| (i.wrapping_mul(2_654_435_761) >> 13) as u8).collect();
+        let image = YuyvImage::new(24, 12, bytes).unwrap();
+        for (width, height) in [(6, 3), (12, 6), (8, 4), (24, 12)] {
+            let spec = spec(width, height);
+            let tensor = preprocess(&Frame::Yuyv(image.clone()), &spec).unwrap();
+            assert_eq!(tensor.data, yuyv_reference(&image, &spec), "{width}x{height}");
         }
     }
 
