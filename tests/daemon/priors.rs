@@ -7,7 +7,7 @@ use std::time::Duration;
 
 use relocd::geometry::{FieldPose, Symmetry};
 use relocd::protocol::gamecontroller::Penalty;
-use relocd::protocol::message::{Message, TriggerKind};
+use relocd::protocol::message::{Hypothesis, Message, TriggerKind};
 use relocd::recording::Recording;
 
 use crate::harness::Daemon;
@@ -37,11 +37,16 @@ fn belief(pose: &FieldPose) -> Vec<u8> {
     .into_bytes()
 }
 
+/// Whether `hypothesis` lies on `truth`'s side of the point symmetry.
+fn on_the_side_of(hypothesis: &Hypothesis, truth: &FieldPose) -> bool {
+    let twin = Symmetry::PointReflection.apply(truth);
+    let (x, y) = (hypothesis.x, hypothesis.y);
+    (x - truth.x()).hypot(y - truth.y()) < (x - twin.x()).hypot(y - twin.y())
+}
+
 /// Whether the heaviest hypothesis lies on `truth`'s side of the point symmetry.
 fn heaviest_is_twin_of(message: &Message, truth: &FieldPose) -> bool {
-    let best = &message.hypotheses[0];
-    let twin = Symmetry::PointReflection.apply(truth);
-    (best.x - truth.x()).hypot(best.y - truth.y()) < (best.x - twin.x()).hypot(best.y - twin.y())
+    on_the_side_of(&message.hypotheses[0], truth)
 }
 
 /// Streams beliefs at 10 Hz for a second, then a fall (LoLA: standing, lying, standing again).
@@ -70,8 +75,14 @@ fn the_belief_before_a_fall_picks_the_twin_and_a_flipped_belief_leaves_the_other
     assert!(fall.prior.as_deref().is_some_and(|prior| prior.starts_with("belief")), "{:?}", fall.prior);
     assert!(heaviest_is_twin_of(&fall, &truth), "{:?} for the truth {truth:?}", fall.hypotheses);
     let belief = fall.priors.iter().find(|prior| prior.name == "belief").expect("the belief's factors");
+    // One factor per hypothesis, in the message's order: the likeliest 1, those on the truth's side
+    // high (the lines may find several places there), those on the other side nil.
     assert_eq!(belief.factors.len(), fall.hypotheses.len());
-    assert_eq!(belief.factors[0], 1.0);
+    assert_eq!(belief.factors.iter().copied().fold(0.0, f64::max), 1.0, "{:?}", belief.factors);
+    for (factor, hypothesis) in belief.factors.iter().zip(&fall.hypotheses) {
+        let expected = if on_the_side_of(hypothesis, &truth) { *factor > 0.1 } else { *factor < 1e-6 };
+        assert!(expected, "belief factor {factor} for {hypothesis:?}, truth {truth:?}");
+    }
 
     // A belief wrong by a flip wins the heaviest place, but the right twin keeps the floor.
     let flipped = belief_then_fall(&daemon, &Symmetry::PointReflection.apply(&near));
