@@ -71,6 +71,11 @@ const NEAR_REACH: (f64, f64) = (2.0, 1.0);
 /// Fits closer than this (metres, radians) are one place.
 const SAME_PLACE: (f64, f64) = (0.1, 0.035);
 
+/// `sigma` within `low..=high`; a spread that is not a number searches the widest region (`high`).
+fn bounded(sigma: f64, low: f64, high: f64) -> f64 {
+    if sigma.is_finite() { sigma.clamp(low, high) } else { high }
+}
+
 /// What the lines made of one hypothesis.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum LineCheck {
@@ -239,13 +244,10 @@ impl LineRefiner {
     /// that a guess farther off than one fit can converge from still finds its place.
     pub fn search_near(&self, frames: &[FramePercepts], guess: &Guess) -> Vec<LineFit> {
         let (step, turn) = search::grid_spacing();
-        let reach = |sigma: f64, least: f64, most: f64| {
-            if sigma.is_finite() { (2.0 * sigma).clamp(least, most) } else { most }
-        };
         let region = Region {
             centre: guess.pose,
-            reach: reach(guess.sigma.x.max(guess.sigma.y), step, NEAR_REACH.0),
-            turn: reach(guess.sigma.theta, turn, NEAR_REACH.1),
+            reach: bounded(2.0 * guess.sigma.x.max(guess.sigma.y), step, NEAR_REACH.0),
+            turn: bounded(2.0 * guess.sigma.theta, turn, NEAR_REACH.1),
         };
         self.search_within(frames, Some(&region))
     }
@@ -278,9 +280,6 @@ impl LineRefiner {
 
     /// Fits and checks one guess.
     fn check_one(&self, frames: &[FramePercepts], observations: &[Observation], guess: &Guess) -> LineFit {
-        // A spread that is not a number searches the widest region.
-        let bounded =
-            |sigma: f64, low: f64, high: f64| if sigma.is_finite() { sigma.clamp(low, high) } else { high };
         let prior = Prior {
             pose: guess.pose,
             sigma: Vector3::new(
