@@ -50,9 +50,11 @@ const MIN_EXPECTED: usize = 8;
 const INLIER_SIGMAS: f64 = 2.5;
 /// Least share of the points on a line, and largest share of the expected lines unseen, for a fit to
 /// stand: a true pose has (nearly) all points on lines and sees what it should, while a wrong fit that
-/// found lines elsewhere leaves a few points off or misses a line (measured: BENCHMARKS.md).
+/// found lines elsewhere leaves a few points off or misses a line (measured: BENCHMARKS.md; the
+/// unseen limit was 5% until the percepts dropped crossings that do not line up, which thins a short
+/// line's few crossings).
 const MIN_INLIER_SHARE: f64 = 0.97;
-const MAX_UNSEEN_SHARE: f64 = 0.05;
+const MAX_UNSEEN_SHARE: f64 = 0.1;
 /// Weight factor on top of the quality for a contradicted hypothesis.
 const CONTRADICTED_FACTOR: f64 = 0.1;
 /// Largest line-only σ (position, metres; heading, radians) for a fit to count as fully refined.

@@ -10,12 +10,15 @@
 //!   ([`scan`]), so sun patches, shadows, backlight and blurred lines with the carpet's tint are
 //!   judged locally. A crossing must continue on the neighbouring parallel scan lines (on both sides,
 //!   or further along one where a line ends): a painted line does, a ball's patch, a foot or a speck does
-//!   not; and it may be no wider than its distance below the border allows.
+//!   not; it may be no wider than its distance below the border allows; and it must line up with the
+//!   crossings of the neighbouring scan lines ([`chains`]): sunlit specks of carpet texture and bright
+//!   blotches continue in their pixels but not as a line.
 //! - On the ground ([`detect`]): a crossing is kept when its width on the ground fits a painted line
 //!   (a robot's leg or a ball, standing above the ground, projects far wider) under the camera pose or
 //!   a pose a few degrees of pitch away (what a real robot's joint sensors may be off by), and its
 //!   centre projects onto the ground.
 
+mod chains;
 mod palette;
 mod scan;
 
@@ -49,6 +52,9 @@ const CALIBRATION_STEP: f64 = 0.25 * std::f64::consts::PI / 180.0;
 const GROUND_WIDTH_RANGE: (f64, f64) = (0.4, 3.0);
 /// Weight of each carpet pixel in the running carpet brightness along a scan line.
 const RUNNING_WEIGHT: f32 = 1.0 / 32.0;
+/// Scan spacings within which a crossing that lines up with none of its family is kept beside a kept
+/// crossing of the other family (see [`chains::near_any`]).
+const JUNCTION_REACH: f64 = 1.5;
 /// Line points kept per frame at most (evenly thinned beyond).
 const MAX_POINTS: usize = 400;
 
@@ -331,11 +337,14 @@ pub fn detect_in_image(frame: &Frame) -> Result<ImagePercepts, PerceptError> {
         };
         (crossing.end - crossing.start) as f64 <= perspective_width_limit(row - image.carpet_top_at(column))
     });
+    found.retain(|&(axis, position, crossing)| {
+        continues(&pixels, &palette, axis, position, crossing, (width_px, height_px))
+    });
+    let lined_up = lined_up(&found, scan_spacing, (width, height));
     image.crossings = found
         .into_iter()
-        .filter(|&(axis, position, crossing)| {
-            continues(&pixels, &palette, axis, position, crossing, (width_px, height_px))
-        })
+        .zip(lined_up)
+        .filter_map(|(found, lined_up)| lined_up.then_some(found))
         .map(|(axis, position, crossing)| {
             let across = position as f64 + 0.5;
             let (start, end) = (crossing.start as f64, crossing.end as f64);
@@ -350,6 +359,41 @@ pub fn detect_in_image(frame: &Frame) -> Result<ImagePercepts, PerceptError> {
         })
         .collect();
     Ok(image)
+}
+
+/// Which of the crossings `found` (vertical scan lines first, then horizontal ones) belong to a
+/// straight piece of three within their family (see [`chains`]).
+fn lined_up(found: &[(Axis, usize, Crossing)], scan_spacing: usize, dimensions: (u32, u32)) -> Vec<bool> {
+    let placed = |&(_, position, crossing): &(Axis, usize, Crossing)| chains::Placed {
+        scan_line: position / scan_spacing,
+        centre: (crossing.start + crossing.end) as f64 / 2.0,
+        width: (crossing.end - crossing.start) as f64,
+    };
+    let vertical = found.iter().take_while(|&&(axis, ..)| axis == Axis::Vertical).count();
+    let (columns, rows) = found.split_at(vertical);
+    let family = |crossings: &[(Axis, usize, Crossing)]| {
+        chains::in_straight_pieces(&crossings.iter().map(placed).collect::<Vec<_>>(), scan_spacing as f64)
+    };
+    let mut in_pieces = family(columns);
+    in_pieces.extend(family(rows));
+    let mut kept = in_pieces.clone();
+    let pixel = |&(axis, position, crossing): &(Axis, usize, Crossing)| {
+        let (across, along) = (position as f64 + 0.5, (crossing.start + crossing.end) as f64 / 2.0);
+        if axis == Axis::Vertical { (across, along) } else { (along, across) }
+    };
+    let reach = JUNCTION_REACH * scan_spacing as f64;
+    let centres = |range: std::ops::Range<usize>, keep: bool| -> Vec<(usize, (f64, f64))> {
+        range.filter(|&i| in_pieces[i] == keep).map(|i| (i, pixel(&found[i]))).collect()
+    };
+    for (own, other) in [(0..vertical, vertical..found.len()), (vertical..found.len(), 0..vertical)] {
+        let unkept = centres(own, false);
+        let beside: Vec<(f64, f64)> = centres(other, true).into_iter().map(|(_, centre)| centre).collect();
+        let centres: Vec<(f64, f64)> = unkept.iter().map(|&(_, centre)| centre).collect();
+        for ((index, _), near) in unkept.iter().zip(chains::near_any(&centres, &beside, reach, dimensions)) {
+            kept[*index] |= near;
+        }
+    }
+    kept
 }
 
 /// The widest a line crossing may be `below` pixels under the carpet's top edge: a line's width in the
