@@ -19,7 +19,8 @@ use crate::frame::Frame;
 use crate::geometry::angle::angle_distance;
 use crate::geometry::{CameraIntrinsics, CameraPose, FieldModel, FieldPose, PoseSigma, Symmetry};
 use crate::refine::{
-    FramePercepts, Guess, LineCheck, LineEvidence, LineFit, LineRefiner, LineVerdict, same_place_or_twin,
+    FramePercepts, Guess, LineCheck, LineEvidence, LineFit, LineRefiner, LineVerdict, distinct_places,
+    same_place_or_twin,
 };
 use crate::relocaliser::contract::CameraRange;
 use crate::relocaliser::{
@@ -412,10 +413,12 @@ pub fn verify(
         }
     } else {
         let network = std::mem::take(hypotheses);
-        let count = places.len();
+        // Several fits are ambiguous even where they are one place (along one line): which pose on it
+        // is right, the lines cannot say; `places` counts the places.
+        let (fitted, count) = (places.len(), distinct_places(&places));
         for place in places {
             let evidence = LineEvidence {
-                check: if count > 1 { LineCheck::Ambiguous } else { place.evidence.check },
+                check: if fitted > 1 { LineCheck::Ambiguous } else { place.evidence.check },
                 places: Some(count),
                 ..place.evidence
             };

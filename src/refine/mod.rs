@@ -72,6 +72,8 @@ const SEARCH_MAX_MEAN_DISTANCE: f64 = 0.12;
 const NEAR_REACH: (f64, f64) = (2.0, 1.0);
 /// Fits closer than this (metres, radians) are one place.
 const SAME_PLACE: (f64, f64) = (0.1, 0.035);
+/// Fits closer than this many of their combined σ in every component are one place too.
+const PLACE_SIGMAS: f64 = 2.0;
 
 /// `sigma` within `low..=high`; a spread that is not a number searches the widest region (`high`).
 fn bounded(sigma: f64, low: f64, high: f64) -> f64 {
@@ -389,7 +391,35 @@ fn expected_to_be_seen(primitive: &Primitive) -> bool {
     }
 }
 
-/// Whether two fitted poses are one place on the field, or point-symmetric twins of one.
+/// Whether two fits are one place, or point-symmetric twins of one: closer than [`SAME_PLACE`], or
+/// within [`PLACE_SIGMAS`] of their combined σ in x, y and heading (a fit to one line is uncertain
+/// along it, so fits a few tens of centimetres apart along that line are one place).
+fn one_place(a: &LineFit, b: &LineFit) -> bool {
+    let within =
+        |difference: f64, sigma_a: f64, sigma_b: f64| difference <= PLACE_SIGMAS * sigma_a.hypot(sigma_b);
+    let same = |pose: &FieldPose| {
+        let turn = angle_distance(pose.heading(), b.pose.heading());
+        (pose.distance_to(&b.pose) <= SAME_PLACE.0 && turn <= SAME_PLACE.1)
+            || (within((pose.x() - b.pose.x()).abs(), a.sigma.x, b.sigma.x)
+                && within((pose.y() - b.pose.y()).abs(), a.sigma.y, b.sigma.y)
+                && within(turn, a.sigma.theta, b.sigma.theta))
+    };
+    same(&a.pose) || same(&Symmetry::PointReflection.apply(&a.pose))
+}
+
+/// How many distinct places `fits` show: fits that are [`one_place`] with an earlier one count once.
+pub fn distinct_places(fits: &[LineFit]) -> usize {
+    let mut representatives: Vec<&LineFit> = Vec::new();
+    for fit in fits {
+        if !representatives.iter().any(|known| one_place(known, fit)) {
+            representatives.push(fit);
+        }
+    }
+    representatives.len()
+}
+
+/// Whether two fitted poses are one place on the field, or point-symmetric twins of one, closer than
+/// [`SAME_PLACE`] (the same fit found twice).
 pub fn same_place_or_twin(a: &FieldPose, b: &FieldPose) -> bool {
     let same = |a: &FieldPose, b: &FieldPose| {
         a.distance_to(b) <= SAME_PLACE.0 && angle_distance(a.heading(), b.heading()) <= SAME_PLACE.1
@@ -413,4 +443,52 @@ fn observations(frames: &[FramePercepts]) -> Vec<Observation> {
             })
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn fit(x: f64, y: f64, theta: f64, sigma: (f64, f64, f64)) -> LineFit {
+        LineFit {
+            pose: FieldPose::new(x, y, theta).unwrap(),
+            sigma: PoseSigma { x: sigma.0, y: sigma.1, theta: sigma.2 },
+            evidence: LineEvidence {
+                check: LineCheck::Partial,
+                points: 40,
+                inlier_share: 1.0,
+                unseen_share: None,
+                places: None,
+            },
+            factor: 1.0,
+        }
+    }
+
+    #[test]
+    fn fits_along_one_line_within_their_sigma_are_one_place_and_sharp_fits_apart_are_two() {
+        // Two fits to the halfway line, 26 cm apart along it, each uncertain along it.
+        let along = (0.02, 0.3, 0.01);
+        assert!(one_place(&fit(0.0, 1.0, 0.5, along), &fit(0.01, 1.26, 0.5, along)));
+        // Their point-symmetric twins are the same place too.
+        assert!(one_place(&fit(0.0, 1.0, 0.5, along), &fit(-0.01, -1.26, 0.5 - std::f64::consts::PI, along)));
+        // Across the line the fit is sharp: 26 cm across it are two places.
+        assert!(!one_place(&fit(0.0, 1.0, 0.5, along), &fit(0.26, 1.0, 0.5, along)));
+        // Two refined fits 26 cm apart are two places; 5 cm apart, one.
+        let sharp = (0.02, 0.02, 0.01);
+        assert!(!one_place(&fit(0.0, 1.0, 0.5, sharp), &fit(0.0, 1.26, 0.5, sharp)));
+        assert!(one_place(&fit(0.0, 1.0, 0.5, sharp), &fit(0.0, 1.05, 0.5, sharp)));
+    }
+
+    #[test]
+    fn fits_along_one_line_count_as_one_place() {
+        let fits = [
+            fit(0.0, 1.0, 0.5, (0.02, 0.3, 0.01)),
+            fit(0.0, 1.2, 0.5, (0.02, 0.02, 0.01)),
+            fit(0.0, -1.3, 0.5 - std::f64::consts::PI, (0.02, 0.4, 0.01)),
+            fit(2.0, 1.0, 0.5, (0.02, 0.02, 0.01)),
+        ];
+        assert_eq!(distinct_places(&fits), 2);
+        assert_eq!(distinct_places(&fits[1..2]), 1);
+        assert_eq!(distinct_places(&[]), 0);
+    }
 }
