@@ -165,7 +165,9 @@ fn replay_refines_the_sample_against_the_field_lines() {
         serde_json::from_str(&std::fs::read_to_string(&metrics_path).unwrap()).unwrap();
     let lines_block = &metrics["refined"];
     assert_eq!(lines_block["bursts"], 24);
-    assert!(lines_block["refined_share"].as_f64().unwrap() >= 0.5, "{lines_block}");
+    // 11 of the 24 frames (12 before the percepts required crossings to line up: frame 9's two-crossing
+    // stub between a goal post and a corner is dropped, and its line then counts as unseen).
+    assert!(lines_block["refined_share"].as_f64().unwrap() >= 0.4, "{lines_block}");
     let median = lines_block["where_refined"]["location_median_m"].as_f64().unwrap();
     assert!(median < 0.05, "refined median {median} m");
     assert!(stderr(&output).contains("lines best"), "{}", stderr(&output));
