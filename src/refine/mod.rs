@@ -397,14 +397,14 @@ fn expected_to_be_seen(primitive: &Primitive) -> bool {
 fn one_place(a: &LineFit, b: &LineFit) -> bool {
     let within =
         |difference: f64, sigma_a: f64, sigma_b: f64| difference <= PLACE_SIGMAS * sigma_a.hypot(sigma_b);
-    let same = |pose: &FieldPose| {
-        let turn = angle_distance(pose.heading(), b.pose.heading());
-        (pose.distance_to(&b.pose) <= SAME_PLACE.0 && turn <= SAME_PLACE.1)
-            || (within((pose.x() - b.pose.x()).abs(), a.sigma.x, b.sigma.x)
-                && within((pose.y() - b.pose.y()).abs(), a.sigma.y, b.sigma.y)
-                && within(turn, a.sigma.theta, b.sigma.theta))
+    let within_sigma = |pose: &FieldPose| {
+        within((pose.x() - b.pose.x()).abs(), a.sigma.x, b.sigma.x)
+            && within((pose.y() - b.pose.y()).abs(), a.sigma.y, b.sigma.y)
+            && within(angle_distance(pose.heading(), b.pose.heading()), a.sigma.theta, b.sigma.theta)
     };
-    same(&a.pose) || same(&Symmetry::PointReflection.apply(&a.pose))
+    same_place_or_twin(&a.pose, &b.pose)
+        || within_sigma(&a.pose)
+        || within_sigma(&Symmetry::PointReflection.apply(&a.pose))
 }
 
 /// How many distinct places `fits` show: fits that are [`one_place`] with an earlier one count once.

@@ -329,13 +329,9 @@ pub fn detect_in_image(frame: &Frame) -> Result<ImagePercepts, PerceptError> {
             }
         }
     }
-    found.retain(|&(axis, position, crossing)| {
-        let middle = (crossing.start + crossing.end) as f64 / 2.0;
-        let (column, row) = match axis {
-            Axis::Vertical => (position as f64 + 0.5, middle),
-            Axis::Horizontal => (middle, position as f64 + 0.5),
-        };
-        (crossing.end - crossing.start) as f64 <= perspective_width_limit(row - image.carpet_top_at(column))
+    found.retain(|found| {
+        let (column, row) = centre_pixel(found);
+        found.2.width() <= perspective_width_limit(row - image.carpet_top_at(column))
     });
     found.retain(|&(axis, position, crossing)| {
         continues(&pixels, &palette, axis, position, crossing, (width_px, height_px))
@@ -361,13 +357,23 @@ pub fn detect_in_image(frame: &Frame) -> Result<ImagePercepts, PerceptError> {
     Ok(image)
 }
 
+/// The centre of a crossing `found` on the scan line at `position` across `axis`: (column, row), pixels.
+fn centre_pixel(&(axis, position, crossing): &(Axis, usize, Crossing)) -> (f64, f64) {
+    let across = position as f64 + 0.5;
+    match axis {
+        Axis::Vertical => (across, crossing.middle()),
+        Axis::Horizontal => (crossing.middle(), across),
+    }
+}
+
 /// Which of the crossings `found` (vertical scan lines first, then horizontal ones) belong to a
-/// straight piece of three within their family (see [`chains`]).
+/// straight piece of three within their family, or lie beside a kept crossing of the other family
+/// (see [`chains`]).
 fn lined_up(found: &[(Axis, usize, Crossing)], scan_spacing: usize, dimensions: (u32, u32)) -> Vec<bool> {
     let placed = |&(_, position, crossing): &(Axis, usize, Crossing)| chains::Placed {
         scan_line: position / scan_spacing,
-        centre: (crossing.start + crossing.end) as f64 / 2.0,
-        width: (crossing.end - crossing.start) as f64,
+        centre: crossing.middle(),
+        width: crossing.width(),
     };
     let vertical = found.iter().take_while(|&&(axis, ..)| axis == Axis::Vertical).count();
     let (columns, rows) = found.split_at(vertical);
@@ -376,21 +382,17 @@ fn lined_up(found: &[(Axis, usize, Crossing)], scan_spacing: usize, dimensions: 
     };
     let mut in_pieces = family(columns);
     in_pieces.extend(family(rows));
-    let mut kept = in_pieces.clone();
-    let pixel = |&(axis, position, crossing): &(Axis, usize, Crossing)| {
-        let (across, along) = (position as f64 + 0.5, (crossing.start + crossing.end) as f64 / 2.0);
-        if axis == Axis::Vertical { (across, along) } else { (along, across) }
-    };
+    let centres: Vec<(f64, f64)> = found.iter().map(centre_pixel).collect();
     let reach = JUNCTION_REACH * scan_spacing as f64;
-    let centres = |range: std::ops::Range<usize>, keep: bool| -> Vec<(usize, (f64, f64))> {
-        range.filter(|&i| in_pieces[i] == keep).map(|i| (i, pixel(&found[i]))).collect()
-    };
+    let mut kept = in_pieces.clone();
     for (own, other) in [(0..vertical, vertical..found.len()), (vertical..found.len(), 0..vertical)] {
-        let unkept = centres(own, false);
-        let beside: Vec<(f64, f64)> = centres(other, true).into_iter().map(|(_, centre)| centre).collect();
-        let centres: Vec<(f64, f64)> = unkept.iter().map(|&(_, centre)| centre).collect();
-        for ((index, _), near) in unkept.iter().zip(chains::near_any(&centres, &beside, reach, dimensions)) {
-            kept[*index] |= near;
+        let unkept: Vec<usize> = own.filter(|&i| !in_pieces[i]).collect();
+        let beside: Vec<(f64, f64)> = other.filter(|&i| in_pieces[i]).map(|i| centres[i]).collect();
+        let unkept_centres: Vec<(f64, f64)> = unkept.iter().map(|&i| centres[i]).collect();
+        for (index, near) in
+            unkept.into_iter().zip(chains::near_any(&unkept_centres, &beside, reach, dimensions))
+        {
+            kept[index] |= near;
         }
     }
     kept

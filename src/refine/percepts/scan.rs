@@ -33,6 +33,18 @@ pub(super) struct Crossing {
     pub(super) threshold: f32,
 }
 
+impl Crossing {
+    /// The middle of the core along the scan line, pixels.
+    pub(super) fn middle(&self) -> f64 {
+        (self.start + self.end) as f64 / 2.0
+    }
+
+    /// The core's width along the scan line, pixels.
+    pub(super) fn width(&self) -> f64 {
+        (self.end - self.start) as f64
+    }
+}
+
 /// The crossings of one scan line of `pixels` (in order along it; `green` says which are carpet), each
 /// at most `max_width` pixels wide, with carpet on both sides.
 pub(super) fn crossings(
