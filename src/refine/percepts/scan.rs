@@ -8,7 +8,10 @@ use super::palette::{Palette, Yuv};
 
 /// Carpet pixels on each side of a crossing that give its local reference brightness.
 const SIDE_PIXELS: usize = 6;
-/// Least carpet pixels in a row on each side of a crossing (a lone greenish pixel is noise).
+/// Least carpet pixels in a row on each side of a crossing (a lone greenish pixel is noise). Where
+/// the carpet beside a crossing ends at another bright, grey run, it must also span the crossing's
+/// width (up to `SIDE_PIXELS`): painted lines lie far apart, while sunlit bands between a window
+/// frame's thin shadows are as narrow as the shadows between them.
 const MIN_SIDE_PIXELS: usize = 2;
 /// A line pixel is at least this share brighter than the carpet beside it…
 const MIN_CONTRAST_SHARE: f32 = 0.2;
@@ -69,11 +72,15 @@ pub(super) fn crossings(
             continue;
         }
         let (Some(before), Some(after)) = (
-            carpet_beside(pixels, green, (start.saturating_sub(SIDE_PIXELS)..start).rev()),
-            carpet_beside(pixels, green, end..(end + SIDE_PIXELS).min(pixels.len())),
+            carpet_beside(pixels, green, palette, (start.saturating_sub(SIDE_PIXELS)..start).rev()),
+            carpet_beside(pixels, green, palette, end..(end + SIDE_PIXELS).min(pixels.len())),
         ) else {
             continue;
         };
+        let least = (end - start).min(SIDE_PIXELS);
+        if [&before, &after].iter().any(|side| side.against_paint && side.pixels < least) {
+            continue;
+        }
         let reference = before.luma.max(after.luma);
         let texture = TEXTURE_CONTRAST * before.roughness.max(after.roughness);
         let threshold = threshold(reference).max(reference + texture);
@@ -111,14 +118,25 @@ struct Side {
     luma: f32,
     /// Mean luma step between neighbouring pixels: the carpet's texture there.
     roughness: f32,
+    /// How many carpet pixels in a row it has (at most `SIDE_PIXELS`).
+    pixels: usize,
+    /// Whether those end at a paint-like pixel (another bright, grey run) within `SIDE_PIXELS`.
+    against_paint: bool,
 }
 
 /// The carpet pixels met first along `side` (up to `SIDE_PIXELS` of them, contiguous); `None` when
 /// fewer than `MIN_SIDE_PIXELS` carpet pixels border the run there.
-fn carpet_beside(pixels: &[Yuv], green: &[bool], side: impl Iterator<Item = usize>) -> Option<Side> {
+fn carpet_beside(
+    pixels: &[Yuv],
+    green: &[bool],
+    palette: &Palette,
+    side: impl Iterator<Item = usize>,
+) -> Option<Side> {
     let (mut sum, mut steps, mut count, mut last) = (0.0, 0.0, 0usize, None);
+    let mut against_paint = false;
     for index in side {
         if !green[index] {
+            against_paint = palette.looks_like_paint(pixels[index]);
             break;
         }
         let luma = pixels[index].0;
@@ -127,8 +145,12 @@ fn carpet_beside(pixels: &[Yuv], green: &[bool], side: impl Iterator<Item = usiz
         last = Some(luma);
         count += 1;
     }
-    (count >= MIN_SIDE_PIXELS)
-        .then(|| Side { luma: sum / count as f32, roughness: steps / (count - 1).max(1) as f32 })
+    (count >= MIN_SIDE_PIXELS).then(|| Side {
+        luma: sum / count as f32,
+        roughness: steps / (count - 1).max(1) as f32,
+        pixels: count,
+        against_paint,
+    })
 }
 
 /// The top of the carpet in one image column (`pixels` from top to bottom), as SPL teams find the
@@ -207,6 +229,29 @@ mod tests {
             let (pixels, green) = line(&colours);
             assert!(crossings(&pixels, &green, &palette, 10).is_empty(), "{name}");
         }
+    }
+
+    #[test]
+    fn sunlit_stripes_between_thin_shadows_are_not_lines() {
+        // Carpet striped by a window frame's shadows: 8-pixel bright bands between 3-pixel strips of
+        // shadowed carpet. A painted line of that width just below the field's border has as little
+        // carpet above it, but against a wall, not against another bright band.
+        let band = [scaled(PAINT, 0.9); 8];
+        let mut stripes = vec![CARPET; 10];
+        for _ in 0..3 {
+            stripes.extend(band);
+            stripes.extend([CARPET; 3]);
+        }
+        stripes.extend([CARPET; 7]);
+        let mut below_the_border = vec![[40, 40, 45]; 10];
+        below_the_border.extend([CARPET; 3]);
+        below_the_border.extend(band);
+        below_the_border.extend([CARPET; 10]);
+        let palette = palette();
+        let (pixels, green) = line(&stripes);
+        assert!(crossings(&pixels, &green, &palette, 10).is_empty());
+        let (pixels, green) = line(&below_the_border);
+        assert_eq!(crossings(&pixels, &green, &palette, 10).len(), 1);
     }
 
     #[test]
