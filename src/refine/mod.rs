@@ -57,8 +57,9 @@ const MIN_INLIER_SHARE: f64 = 0.97;
 const MAX_UNSEEN_SHARE: f64 = 0.1;
 /// Weight factor on top of the quality for a contradicted hypothesis.
 const CONTRADICTED_FACTOR: f64 = 0.1;
-/// Largest line-only σ (position, metres; heading, radians) for a fit to count as fully refined.
-const REFINED_SIGMA: (f64, f64) = (0.1, 0.035);
+/// Largest line-only σ (position, metres; heading, radians) for a fit to count as fully refined: about
+/// the 5 cm / 1° a refined pose claims (at 10 cm / 2° fits 5–10 cm off were called refined).
+const REFINED_SIGMA: (f64, f64) = (0.06, 0.02);
 /// Least prior σ (position, metres; heading, radians) the search starts from.
 const MIN_PRIOR_SIGMA: (f64, f64) = (0.15, 0.09);
 /// Largest prior σ the search covers.
@@ -83,10 +84,10 @@ fn bounded(sigma: f64, low: f64, high: f64) -> f64 {
 /// What the lines made of one hypothesis.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum LineCheck {
-    /// The lines fix x, y and heading: the pose and σ are the fit's.
+    /// The lines fix x, y and heading (to `REFINED_SIGMA`): the pose and σ are the fit's.
     Refined,
-    /// The lines fix only some directions (one family of parallel lines): fitted, with the network's
-    /// pose holding the rest.
+    /// The lines fit but fix less (one family of parallel lines, or σ wider than `REFINED_SIGMA`):
+    /// fitted, with the network's pose holding the rest.
     Partial,
     /// Too few line points: the network's hypothesis as it was.
     Unrefined,
