@@ -174,7 +174,8 @@ pub fn run(
                 median_ms(iterations, || drop(refiner.percepts(&frame, &intrinsics, &camera_pose)))
             }
             Stage::Refine => median_ms(iterations, || {
-                pipeline::verify(&refiner, &percepts, &mut heaviest.clone(), &[], GlobalSearch::Never)
+                let _ =
+                    pipeline::verify(&refiner, &percepts, &mut heaviest.clone(), &[], GlobalSearch::Never);
             }),
             Stage::Search => median_ms(iterations, || drop(refiner.search(&percepts))),
             Stage::Total => median_ms(iterations, || drop(relocaliser.relocalise(&frame, 0.0))),

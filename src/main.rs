@@ -301,6 +301,10 @@ struct ReplayArgs {
     /// Added to every recorded camera roll, degrees.
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true, value_name = "DEG")]
     camera_roll_offset: f64,
+    /// With --refine: every burst starts from the recorded camera poses; by default the camera's
+    /// calibration error is learnt over the bursts (one robot's recording), as the daemon does.
+    #[arg(long)]
+    fixed_calibration: bool,
     /// Write plots (error scatter, field map with true and predicted poses) as PNG into this directory.
     #[cfg(feature = "report")]
     #[arg(long, value_name = "DIR")]
@@ -690,10 +694,14 @@ fn replay(args: ReplayArgs) -> anyhow::Result<()> {
             prior_seed: args.prior_seed,
             min_share: args.min_share,
             camera_offset: (args.camera_pitch_offset.to_radians(), args.camera_roll_offset.to_radians()),
+            learn_calibration: !args.fixed_calibration,
         },
         &mut stdout.lock(),
     )
     .context("writing results")?;
+    if let Some(calibration) = &summary.calibration {
+        info!(%calibration, "camera calibration learnt");
+    }
     // The field is only drawn in the report plots.
     #[cfg(not(feature = "report"))]
     drop(field);

@@ -18,6 +18,7 @@ use crate::pipeline::priors::simulate::{PriorSpec, priors_for};
 use crate::pipeline::{BurstError, Estimate, Pipeline};
 use crate::protocol::message::LineEvidence;
 use crate::recording::{FrameRecord, Recording};
+use crate::refine::CalibrationTracker;
 use crate::relocaliser::{Relocalisation, Timings};
 
 /// A pose on the wire: metres and radians.
@@ -205,6 +206,8 @@ pub struct ReplaySummary {
     pub metrics: Option<Metrics>,
     /// Without a network: what the lines alone found, over bursts with a true pose.
     pub lines_alone: Option<RefinedMetrics>,
+    /// The camera calibration learnt over the bursts, where any burst taught it.
+    pub calibration: Option<CalibrationTracker>,
     /// Each frame with a true pose, evaluated (for plots).
     pub evaluations: Vec<Evaluation>,
 }
@@ -224,6 +227,9 @@ pub struct ReplayOptions {
     /// Pitch and roll offsets added to every recorded camera pose, radians: a robot's extrinsic
     /// calibration, or a deliberate error to see what one costs.
     pub camera_offset: (f64, f64),
+    /// Whether the camera's calibration error is learnt over the bursts (one robot's recording), as
+    /// the daemon does; otherwise every burst starts from the recorded poses.
+    pub learn_calibration: bool,
 }
 
 /// Relocalises every frame of `recording` with `pipeline`, writing one JSON line per frame to `out`;
@@ -245,8 +251,12 @@ pub fn replay(
     let mut rng = ChaCha8Rng::seed_from_u64(options.prior_seed);
     let with_priors = !options.priors.is_empty();
     let mut failed = 0;
+    let mut calibration = CalibrationTracker::default();
     for group in recording.records().chunks(burst_size) {
-        let mut burst = pipeline.burst();
+        let mut burst = match options.learn_calibration {
+            true => pipeline.calibrated_burst(calibration.calibration()),
+            false => pipeline.burst(),
+        };
         for record in group {
             let _frame = tracing::warn_span!("frame", file = %record.file).entered();
             let head_yaw = record.camera.map_or(0.0, |camera| camera.head_yaw());
@@ -281,6 +291,11 @@ pub fn replay(
         if burst_size > 1 || with_priors || pipeline.checks_lines() {
             let priors = priors_for(&options.priors, group[0].pose.as_ref(), options.min_share, &mut rng);
             let (estimate, _) = burst.finish(&priors);
+            if let (true, Ok(Estimate { camera: Some(measured), .. })) =
+                (options.learn_calibration, &estimate)
+            {
+                calibration.learn(measured);
+            }
             match (&estimate, group[0].pose) {
                 (Ok(estimate), Some(truth)) => {
                     if (burst_size > 1 || with_priors) && !estimate.network.is_empty() {
@@ -319,6 +334,7 @@ pub fn replay(
             .is_none()
             .then(|| RefinedMetrics::summarise(&refined_evaluations))
             .flatten(),
+        calibration: (calibration.learnt() > 0).then_some(calibration),
         evaluations,
     })
 }

@@ -9,9 +9,9 @@
 use image::{Rgb, RgbImage};
 use relocd::frame::{Frame, YuyvImage};
 use relocd::geometry::{Camera, CameraIntrinsics, CameraPose, FieldModel, FieldPose, PoseSigma, Symmetry};
-use relocd::pipeline::{GlobalSearch, Hypothesis, verify};
+use relocd::pipeline::{GlobalSearch, Hypothesis, Pipeline, Priors, verify};
 use relocd::refine::line_map::Primitive;
-use relocd::refine::{FramePercepts, Guess, LineCheck, LineRefiner, PerceptError};
+use relocd::refine::{CalibrationTracker, FramePercepts, Guess, LineCheck, LineRefiner, PerceptError};
 use relocd::sim::{Randomisation, SampledFrame, render};
 
 /// Seed of the frames rendered here: never used for training.
@@ -231,6 +231,38 @@ fn a_prior_guess_near_the_truth_finds_the_place_a_lost_network_missed() {
     verify(&refiner, std::slice::from_ref(&percepts), &mut unhelped, &[nowhere], GlobalSearch::Never);
     assert_eq!(unhelped.len(), network.len());
     assert_eq!(unhelped.iter().map(|h| h.lines.unwrap().places).collect::<Vec<_>>(), [None, None]);
+}
+
+#[test]
+fn a_camera_pitch_error_is_learnt_over_bursts() {
+    // The robot believes its camera pitched 0.7° further down than it is, on every frame.
+    let error = 0.7_f64.to_radians();
+    let pipeline = Pipeline::lines_only(&FieldModel::default(), CameraIntrinsics::nao_top());
+    let mut tracker = CalibrationTracker::default();
+    let mut off_after_learning = Vec::new();
+    for index in 0..30 {
+        let (sampled, frame) = rendered(index);
+        let believed = sampled.camera.corrected(error, 0.0).unwrap();
+        let mut burst = pipeline.calibrated_burst(tracker.calibration());
+        burst.add(&frame, sampled.camera.head_yaw(), Some(&believed)).unwrap();
+        let Ok(estimate) = burst.finish(&Priors::default()).0 else { continue };
+        if tracker.learnt() > 0 && estimate.camera.is_some() {
+            let best = &estimate.hypotheses[0];
+            let twin = Symmetry::PointReflection.apply(&best.pose);
+            off_after_learning
+                .push(best.pose.distance_to(&sampled.pose).min(twin.distance_to(&sampled.pose)));
+        }
+        if let Some(measured) = &estimate.camera {
+            tracker.learn(measured);
+        }
+    }
+    let learnt = tracker.calibration().correction;
+    assert!(tracker.learnt() >= 4, "{tracker}");
+    assert!((learnt.x + error).abs() < 0.15_f64.to_radians(), "{tracker}");
+    assert!(learnt.y.abs() < 0.15_f64.to_radians(), "{tracker}");
+    assert!(tracker.calibration().sigma.x < 0.5_f64.to_radians(), "{tracker}");
+    assert!(!off_after_learning.is_empty());
+    assert!(off_after_learning.iter().all(|&off| off < 0.05), "{off_after_learning:?}");
 }
 
 #[test]

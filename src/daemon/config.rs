@@ -95,6 +95,9 @@ pub struct Config {
     /// With `refine`: the line fits also estimate a small correction of the camera's pitch and roll
     /// (a robot's calibration is never exact).
     pub camera_correction: bool,
+    /// With `camera_correction`: the correction's lasting part (the robot's calibration error) is
+    /// learnt over the bursts whose lines fix it, and later fits start from it and hold to it.
+    pub learn_calibration: bool,
     /// The game and team context that tells the symmetric twins apart.
     pub priors: PriorsConfig,
 }
@@ -124,6 +127,7 @@ impl Default for Config {
             refine: true,
             global_search: GlobalSearch::default(),
             camera_correction: true,
+            learn_calibration: true,
             priors: PriorsConfig::default(),
         }
     }

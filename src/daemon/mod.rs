@@ -35,6 +35,7 @@ use crate::pipeline::Pipeline;
 use crate::posture::{PostureConfig, PostureDetector};
 use crate::protocol::address::Address;
 use crate::protocol::gamecontroller::PenaltyWatch;
+use crate::refine::CalibrationTracker;
 use crate::relocaliser::{self, Backend, Model};
 
 /// Triggers waiting for the relocalisation thread on their own; more join a waiting one of their kind.
@@ -115,6 +116,8 @@ pub fn run(config: Config) -> anyhow::Result<()> {
         replacement: replacement.clone(),
         priors: config.priors.clone(),
         goalkeeper: config.player.is_some_and(|player| player == config.priors.goalkeeper),
+        calibration: (config.refine && config.camera_correction && config.learn_calibration)
+            .then(CalibrationTracker::default),
     };
     // The sender drops when the thread ends, however it ends: a thread that died is noticed at once.
     let (alive, mut exited) = tokio::sync::oneshot::channel::<()>();

@@ -19,6 +19,7 @@ use super::triggers::Sensed;
 use crate::geometry::{CameraMounting, FieldPose, Representation};
 use crate::pipeline::{Pipeline, Priors, StageTimes};
 use crate::protocol::message::{FrameCounts, Latency, Message, ModelInfo, SCHEMA_VERSION, Trigger};
+use crate::refine::CalibrationTracker;
 use crate::relocaliser::Model;
 
 /// How often the settle wait looks at the sensors.
@@ -49,6 +50,8 @@ pub struct Worker {
     pub priors: PriorsConfig,
     /// We are the goalkeeper: own half unless a request says otherwise.
     pub goalkeeper: bool,
+    /// The camera calibration learnt over the bursts, where it is learnt.
+    pub calibration: Option<CalibrationTracker>,
 }
 
 /// Hands a newly loaded model to the relocalisation thread, which switches to it between bursts.
@@ -201,7 +204,10 @@ impl Worker {
             stop: &self.stop,
         };
         // Each frame goes through the network as it arrives, while the source waits for the next one.
-        let mut burst = self.pipeline.burst();
+        let mut burst = match &self.calibration {
+            Some(tracker) => self.pipeline.calibrated_burst(tracker.calibration()),
+            None => self.pipeline.burst(),
+        };
         let mut first_taken = None;
         let mut truth = None;
         let (checks_lines, mounting, sensed) = (self.pipeline.checks_lines(), self.mounting, &self.sensed);
@@ -229,6 +235,10 @@ impl Worker {
         let (estimate, stages) = burst.finish(priors);
         times.stages = stages;
         let estimate = estimate.map_err(|error| error.to_string())?;
+        if let (Some(tracker), Some(measured)) = (&mut self.calibration, &estimate.camera) {
+            tracker.learn(measured);
+            info!("camera calibration: {tracker}");
+        }
         message.prior = estimate.priors.names();
         message.priors = estimate.priors.applied.iter().map(Into::into).collect();
         message.frames.used = estimate.frames as u32;

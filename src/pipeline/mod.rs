@@ -19,8 +19,8 @@ use crate::frame::Frame;
 use crate::geometry::angle::angle_distance;
 use crate::geometry::{CameraIntrinsics, CameraPose, FieldModel, FieldPose, PoseSigma, Symmetry};
 use crate::refine::{
-    FramePercepts, Guess, LineCheck, LineEvidence, LineFit, LineRefiner, LineVerdict, distinct_places,
-    same_place_or_twin,
+    CameraCalibration, CameraMeasurement, FramePercepts, Guess, LineCheck, LineEvidence, LineFit,
+    LineRefiner, LineVerdict, distinct_places, same_place_or_twin,
 };
 use crate::relocaliser::contract::CameraRange;
 use crate::relocaliser::{
@@ -55,6 +55,9 @@ pub struct Estimate {
     pub agreeing: usize,
     /// What the burst's priors did to `hypotheses`.
     pub priors: PriorReport,
+    /// The camera's (pitch, roll) calibration the lines measured (the burst's calibration and the
+    /// heaviest hypothesis's correction on top), where they refined that hypothesis at one place.
+    pub camera: Option<CameraMeasurement>,
 }
 
 /// Why a burst gave no estimate.
@@ -177,8 +180,15 @@ impl Pipeline {
 
     /// Starts a burst: add its frames as they arrive, then finish it.
     pub fn burst(&self) -> Burst<'_> {
+        self.calibrated_burst(CameraCalibration::default())
+    }
+
+    /// A burst whose camera poses take `calibration`'s correction, known to its σ (what a
+    /// [`crate::refine::CalibrationTracker`] learnt from earlier bursts).
+    pub fn calibrated_burst(&self, calibration: CameraCalibration) -> Burst<'_> {
         Burst {
             pipeline: self,
+            calibration,
             frames: 0,
             predictions: Vec::new(),
             percepts: Vec::new(),
@@ -193,6 +203,7 @@ impl Pipeline {
 #[derive(Debug)]
 pub struct Burst<'p> {
     pipeline: &'p Pipeline,
+    calibration: CameraCalibration,
     frames: usize,
     predictions: Vec<Prediction>,
     percepts: Vec<FramePercepts>,
@@ -224,8 +235,17 @@ impl Burst<'_> {
         }
         if let (Some(refiner), Some(camera)) = (&self.pipeline.refiner, camera) {
             let started = Instant::now();
-            match refiner.percepts(frame, &self.pipeline.intrinsics, camera) {
-                Ok(found) => self.percepts.push(found),
+            let correction = self.calibration.correction;
+            let found = camera
+                .corrected(correction.x, correction.y)
+                .map_err(|error| format!("the calibrated camera pose: {error}"))
+                .and_then(|camera| {
+                    refiner
+                        .percepts(frame, &self.pipeline.intrinsics, &camera)
+                        .map_err(|error| error.to_string())
+                });
+            match found {
+                Ok(found) => self.percepts.push(found.with_camera_sigma(self.calibration.sigma)),
                 Err(error) => tracing::warn!("frame not used for line refinement: {error}"),
             }
             self.times.lines_ms += started.elapsed().as_secs_f64() * 1e3;
@@ -273,7 +293,9 @@ impl Burst<'_> {
         if let Some(refiner) = &self.pipeline.refiner {
             let verifying = Instant::now();
             let context = priors.guesses();
-            verify(refiner, &self.percepts, &mut estimate.hypotheses, &context, self.pipeline.search);
+            let measured =
+                verify(refiner, &self.percepts, &mut estimate.hypotheses, &context, self.pipeline.search);
+            estimate.camera = measured.map(|measured| self.calibrated(measured));
             self.times.lines_ms += verifying.elapsed().as_secs_f64() * 1e3;
         }
         if !priors.is_empty() {
@@ -288,8 +310,11 @@ impl Burst<'_> {
     /// The estimate of a pipeline without a network: every place the lines fit, and its twin.
     fn lines_alone(&self, priors: &Priors) -> Result<Estimate, BurstError> {
         let mut hypotheses = Vec::new();
+        let mut camera = None;
         if let Some(refiner) = &self.pipeline.refiner {
-            verify(refiner, &self.percepts, &mut hypotheses, &priors.guesses(), GlobalSearch::Always);
+            let measured =
+                verify(refiner, &self.percepts, &mut hypotheses, &priors.guesses(), GlobalSearch::Always);
+            camera = measured.map(|measured| self.calibrated(measured));
         }
         if hypotheses.is_empty() {
             let points = self.percepts.iter().map(|frame| frame.points.len()).sum();
@@ -302,7 +327,13 @@ impl Burst<'_> {
             frames: self.frames,
             agreeing: self.frames,
             priors: report,
+            camera,
         })
+    }
+
+    /// A correction measured on top of this burst's camera poses, as a whole calibration.
+    fn calibrated(&self, measured: CameraMeasurement) -> CameraMeasurement {
+        CameraMeasurement { correction: self.calibration.correction + measured.correction, ..measured }
     }
 }
 
@@ -321,6 +352,7 @@ pub fn fuse(predictions: &[Prediction]) -> Result<Estimate, FusionError> {
         frames: fused.frames,
         agreeing: fused.agreeing,
         priors: PriorReport::default(),
+        camera: None,
     })
 }
 
@@ -366,20 +398,21 @@ const MIN_NETWORK_SIGMA: (f64, f64) = (0.1, 0.05);
 /// says so they look all over the field: if a context guess or the search finds a place, the
 /// hypotheses become the places the lines fit and their point-symmetric twins, weighted by the fit's
 /// quality and by how likely the network's hypotheses make them (never below a floor), and marked
-/// `ambiguous` when there is more than one place.
+/// `ambiguous` when there is more than one place. Returns what the heaviest hypothesis's fit measured
+/// of the camera's correction on top of the frames' poses, where it ends `refined`.
 pub fn verify(
     refiner: &LineRefiner,
     percepts: &[FramePercepts],
     hypotheses: &mut Vec<Hypothesis>,
     context: &[Guess],
     search: GlobalSearch,
-) {
+) -> Option<CameraMeasurement> {
     let network = hypotheses.iter().map(|h| Guess { pose: h.pose, sigma: h.sigma });
     let guesses: Vec<Guess> = network.chain(context.iter().copied()).collect();
     let mut fits = match refiner.check(percepts, &guesses) {
         LineVerdict::TooFewPoints(evidence) => {
             hypotheses.iter_mut().for_each(|hypothesis| hypothesis.lines = Some(evidence));
-            return;
+            return None;
         }
         LineVerdict::Checked(fits) => fits,
     };
@@ -402,6 +435,8 @@ pub fn verify(
         found.extend(refiner.search(percepts));
     }
     let places = if look || !found.is_empty() { places(&fits, found) } else { Vec::new() };
+    // Each hypothesis's camera measurement, in the hypotheses' order.
+    let mut cameras = Vec::new();
     if places.is_empty() {
         for (hypothesis, fit) in hypotheses.iter_mut().zip(fits) {
             *hypothesis = Hypothesis {
@@ -410,6 +445,7 @@ pub fn verify(
                 sigma: fit.sigma,
                 lines: Some(fit.evidence),
             };
+            cameras.push(fit.camera);
         }
     } else {
         let network = std::mem::take(hypotheses);
@@ -425,12 +461,19 @@ pub fn verify(
             for pose in [place.pose, Symmetry::PointReflection.apply(&place.pose)] {
                 let weight = place.factor * (NETWORK_FLOOR + network_likelihood(&pose, &network));
                 hypotheses.push(Hypothesis { pose, weight, sigma: place.sigma, lines: Some(evidence) });
+                cameras.push(place.camera);
             }
         }
     }
     let total: f64 = hypotheses.iter().map(|hypothesis| hypothesis.weight).sum();
     hypotheses.iter_mut().for_each(|hypothesis| hypothesis.weight /= total);
+    let heaviest =
+        (0..hypotheses.len()).max_by(|&a, &b| hypotheses[a].weight.total_cmp(&hypotheses[b].weight));
+    let camera = heaviest
+        .filter(|&index| hypotheses[index].lines.is_some_and(|lines| lines.check == LineCheck::Refined))
+        .and_then(|index| cameras[index]);
     hypotheses.sort_by(|a, b| b.weight.total_cmp(&a.weight));
+    camera
 }
 
 /// The places the lines fit: the network's hypotheses the lines supported (`fits`) and the places

@@ -8,6 +8,7 @@
 //! the point symmetry see the same lines, so they always score the same: only the game prior (or the
 //! surroundings, through the network) can tell them apart.
 
+pub mod calibration;
 pub mod line_map;
 pub mod optimise;
 pub mod percepts;
@@ -17,6 +18,7 @@ use std::sync::OnceLock;
 
 use nalgebra::{Point2, Point3, Vector2, Vector3};
 
+pub use calibration::{CalibrationTracker, CameraCalibration, CameraMeasurement};
 pub use line_map::LineMap;
 use line_map::Primitive;
 pub use percepts::{
@@ -136,6 +138,9 @@ pub struct LineFit {
     pub evidence: LineEvidence,
     /// Factor for the guess's weight: the fit's quality squared, cut further where contradicted.
     pub factor: f64,
+    /// What a refined fit's lines say about the camera's (pitch, roll) correction on top of the
+    /// frames' camera poses, where they fix it.
+    pub camera: Option<CameraMeasurement>,
 }
 
 /// The lines' answer for a burst's guesses.
@@ -285,6 +290,7 @@ impl LineRefiner {
 
     /// Fits and checks one guess.
     fn check_one(&self, frames: &[FramePercepts], observations: &[Observation], guess: &Guess) -> LineFit {
+        let camera = camera_calibration(frames);
         let prior = Prior {
             pose: guess.pose,
             sigma: Vector3::new(
@@ -292,6 +298,7 @@ impl LineRefiner {
                 bounded(guess.sigma.y, MIN_PRIOR_SIGMA.0, MAX_PRIOR_SIGMA.0),
                 bounded(guess.sigma.theta, MIN_PRIOR_SIGMA.1, MAX_PRIOR_SIGMA.1),
             ),
+            camera_sigma: camera.sigma,
         };
         let fitted = fit(&self.map, observations, &prior, self.correct_camera);
         let inlier_share = self.inlier_share(observations, &fitted.pose, &fitted.calibration);
@@ -310,6 +317,7 @@ impl LineRefiner {
                     places: None,
                 },
                 factor: quality.max(0.01).powi(2) * CONTRADICTED_FACTOR,
+                camera: None,
             };
         }
         let line_sigma = fitted
@@ -322,11 +330,16 @@ impl LineRefiner {
         });
         let check = if fixed { LineCheck::Refined } else { LineCheck::Partial };
         let sigma = fitted.covariance.diagonal().map(|variance| variance.max(0.0).sqrt());
+        let measured = fitted
+            .camera_information
+            .filter(|_| fixed)
+            .and_then(|information| CameraMeasurement::from_fit(fitted.calibration, &information, &camera));
         LineFit {
             pose: fitted.pose,
             sigma: PoseSigma { x: sigma.x, y: sigma.y, theta: sigma.z },
             evidence: LineEvidence { check, points, inlier_share, unseen_share, places: None },
             factor: quality.powi(2),
+            camera: measured,
         }
     }
 
@@ -429,6 +442,16 @@ pub fn same_place_or_twin(a: &FieldPose, b: &FieldPose) -> bool {
 }
 
 /// The line points of all frames as observations with their σ.
+/// The prior of a burst's camera correction: none on top of the frames' poses, within the loosest of
+/// their spreads.
+fn camera_calibration(frames: &[FramePercepts]) -> CameraCalibration {
+    let sigma = frames.iter().map(FramePercepts::camera_sigma).reduce(|a, b| a.sup(&b));
+    CameraCalibration {
+        correction: Vector2::zeros(),
+        sigma: sigma.unwrap_or(CameraCalibration::default().sigma),
+    }
+}
+
 fn observations(frames: &[FramePercepts]) -> Vec<Observation> {
     frames
         .iter()
@@ -462,6 +485,7 @@ mod tests {
                 places: None,
             },
             factor: 1.0,
+            camera: None,
         }
     }
 

@@ -6,6 +6,7 @@
 
 use nalgebra::{Matrix2, Matrix3, Point2, SMatrix, SVector, Vector2, Vector3};
 
+use super::calibration::CameraCalibration;
 use super::line_map::LineMap;
 use crate::geometry::FieldPose;
 use crate::geometry::angle::normalize_angle;
@@ -23,8 +24,6 @@ const MAX_ITERATIONS: usize = 30;
 /// Iterations at most of the second pass with the camera correction free: it starts at the
 /// camera-trusting fit, a few steps away.
 const CALIBRATION_ITERATIONS: usize = 6;
-/// Prior standard deviation of the camera's pitch and roll calibration error, radians.
-const CALIBRATION_SIGMA: f64 = 1.0 * std::f64::consts::PI / 180.0;
 /// Largest pitch or roll correction the fit may make, radians.
 const MAX_CALIBRATION: f64 = 3.0 * std::f64::consts::PI / 180.0;
 
@@ -64,6 +63,8 @@ pub struct Prior {
     pub pose: FieldPose,
     /// Standard deviations of (x, y, heading), metres and radians.
     pub sigma: Vector3<f64>,
+    /// Standard deviations of the camera's (pitch, roll) correction, radians.
+    pub camera_sigma: Vector2<f64>,
 }
 
 /// The fitted pose.
@@ -78,8 +79,12 @@ pub struct Fit {
     /// Covariance of (x, y, heading) from lines and prior.
     pub covariance: Matrix3<f64>,
     /// Information about (x, y, heading) from the lines alone, with the camera correction left free
-    /// within its prior: degenerate where lines do not constrain.
+    /// within the prior of a camera nothing was learnt about (a degree: a learnt calibration sharpens
+    /// the fit, not what the fit claims): degenerate where lines do not constrain.
     pub line_information: Matrix3<f64>,
+    /// Information about the camera correction from the lines alone, with the pose left free; `None`
+    /// where the camera was trusted or the lines leave the pose free.
+    pub camera_information: Option<Matrix2<f64>>,
 }
 
 fn to_field(pose: &Vector3<f64>, ground: &Point2<f64>) -> Point2<f64> {
@@ -101,7 +106,7 @@ fn prior_residual(pose: &Vector3<f64>, prior: &Prior) -> Vector3<f64> {
 
 /// The prior's standard deviations of the whole state.
 fn state_sigma(prior: &Prior) -> State {
-    State::new(prior.sigma.x, prior.sigma.y, prior.sigma.z, CALIBRATION_SIGMA, CALIBRATION_SIGMA)
+    State::new(prior.sigma.x, prior.sigma.y, prior.sigma.z, prior.camera_sigma.x, prior.camera_sigma.y)
 }
 
 /// The cost using the map's cell distances: cheap, for the coarse search (no camera correction).
@@ -165,8 +170,8 @@ fn linearise(
         pose_residual.x,
         pose_residual.y,
         pose_residual.z,
-        calibration.x / CALIBRATION_SIGMA,
-        calibration.y / CALIBRATION_SIGMA,
+        calibration.x / prior.camera_sigma.x,
+        calibration.y / prior.camera_sigma.y,
     );
     cost += 0.5 * residual.norm_squared();
     let prior_information = Matrix5::from_diagonal(&sigma.map(|s| 1.0 / (s * s)));
@@ -244,8 +249,8 @@ pub fn fit(map: &LineMap, observations: &[Observation], prior: &Prior, calibrate
         })
         .min_by(|a, b| a.1.cost.total_cmp(&b.1.cost))
         .expect("at least one start");
-    let (state, linearised) = if calibrate && explained_share(map, observations, &state) >= CORRECTABLE_SHARE
-    {
+    let calibrated = calibrate && explained_share(map, observations, &state) >= CORRECTABLE_SHARE;
+    let (state, linearised) = if calibrated {
         levenberg_marquardt(map, observations, state, prior, true, CALIBRATION_ITERATIONS)
     } else {
         (state, linearised)
@@ -261,7 +266,8 @@ pub fn fit(map: &LineMap, observations: &[Observation], prior: &Prior, calibrate
         calibration: state.fixed_rows::<2>(3).into_owned(),
         cost: linearised.cost,
         covariance,
-        line_information: pose_information(&linearised.line_information),
+        line_information: pose_information(&linearised.line_information, &CameraCalibration::default().sigma),
+        camera_information: calibrated.then(|| camera_information(&linearised.line_information)).flatten(),
     }
 }
 
@@ -277,15 +283,24 @@ fn explained_share(map: &LineMap, observations: &[Observation], state: &State) -
 
 /// The lines' information about the pose alone, the camera correction marginalised out within its
 /// prior (Schur complement).
-fn pose_information(lines: &Matrix5) -> Matrix3<f64> {
+fn pose_information(lines: &Matrix5, camera_sigma: &Vector2<f64>) -> Matrix3<f64> {
     let pose = lines.fixed_view::<3, 3>(0, 0).into_owned();
     let cross = lines.fixed_view::<3, 2>(0, 3).into_owned();
     let calibration = lines.fixed_view::<2, 2>(3, 3).into_owned()
-        + Matrix2::from_diagonal_element(1.0 / (CALIBRATION_SIGMA * CALIBRATION_SIGMA));
+        + Matrix2::from_diagonal(&camera_sigma.map(|sigma| 1.0 / (sigma * sigma)));
     match calibration.try_inverse() {
         Some(inverse) => pose - cross * inverse * cross.transpose(),
         None => pose,
     }
+}
+
+/// The lines' information about the camera correction alone, the pose marginalised out with no prior
+/// (Schur complement); `None` where the lines leave the pose free.
+fn camera_information(lines: &Matrix5) -> Option<Matrix2<f64>> {
+    let pose = lines.fixed_view::<3, 3>(0, 0).into_owned();
+    let cross = lines.fixed_view::<3, 2>(0, 3).into_owned();
+    let camera = lines.fixed_view::<2, 2>(3, 3).into_owned();
+    Some(camera - cross.transpose() * pose.try_inverse()? * cross)
 }
 
 /// Test views: robot-frame points on the model's lines as seen from `truth`, every 10 cm, kept where
@@ -329,6 +344,7 @@ mod tests {
         let prior = Prior {
             pose: FieldPose::new(-3.2, -1.8, -2.4 + 0.2).unwrap(),
             sigma: Vector3::new(0.4, 0.4, 0.2),
+            camera_sigma: Vector2::repeat(1.0_f64.to_radians()),
         };
         let fit = fit(&map, &observations, &prior, true);
         assert!(fit.pose.distance_to(&truth) < 0.01, "{:?}", fit.pose);
@@ -345,8 +361,11 @@ mod tests {
         let observations: Vec<Observation> =
             observe(&field, &truth, 2.5).into_iter().filter(|o| (o.ground.y - 0.4).abs() < 0.01).collect();
         assert!(observations.len() > 10);
-        let prior =
-            Prior { pose: FieldPose::new(1.4, 2.5, 0.05).unwrap(), sigma: Vector3::new(0.3, 0.3, 0.1) };
+        let prior = Prior {
+            pose: FieldPose::new(1.4, 2.5, 0.05).unwrap(),
+            sigma: Vector3::new(0.3, 0.3, 0.1),
+            camera_sigma: Vector2::repeat(0.02),
+        };
         let fit = fit(&map, &observations, &prior, true);
         assert_abs_diff_eq!(fit.pose.y(), truth.y(), epsilon = 0.01);
         assert_abs_diff_eq!(fit.pose.x(), 1.4, epsilon = 0.05);
@@ -375,8 +394,11 @@ mod tests {
                 }
             })
             .collect();
-        let prior =
-            Prior { pose: FieldPose::new(-3.3, -1.7, -2.3).unwrap(), sigma: Vector3::new(0.4, 0.4, 0.2) };
+        let prior = Prior {
+            pose: FieldPose::new(-3.3, -1.7, -2.3).unwrap(),
+            sigma: Vector3::new(0.4, 0.4, 0.2),
+            camera_sigma: Vector2::repeat(0.02),
+        };
         let trusted = fit(&map, &observations, &prior, false);
         assert!(trusted.pose.distance_to(&truth) > 0.05, "the error moves the fit: {:?}", trusted.pose);
         let corrected = fit(&map, &observations, &prior, true);

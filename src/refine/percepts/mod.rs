@@ -26,6 +26,7 @@ mod scan;
 use nalgebra::{Point2, Vector2};
 use thiserror::Error;
 
+use super::calibration::CameraCalibration;
 use crate::frame::{Frame, rgb_to_yuv};
 use crate::geometry::{Camera, CameraIntrinsics, CameraPose, FieldPose};
 use palette::{Palette, Yuv};
@@ -170,6 +171,8 @@ pub struct FramePercepts {
     pub points: Vec<LinePoint>,
     intrinsics: CameraIntrinsics,
     camera_pose: CameraPose,
+    /// How far off the camera pose may be in (pitch, roll), radians.
+    camera_sigma: Vector2<f64>,
     image: ImagePercepts,
 }
 
@@ -177,6 +180,18 @@ impl FramePercepts {
     /// Height of the camera above the ground, metres.
     pub fn camera_height(&self) -> f64 {
         self.camera_pose.height()
+    }
+
+    /// The frame as seen with a camera pose known to `sigma` in (pitch, roll), radians (by default a
+    /// degree, [`CameraCalibration::default`]): how far a line fit may correct it.
+    pub fn with_camera_sigma(mut self, sigma: Vector2<f64>) -> Self {
+        self.camera_sigma = sigma;
+        self
+    }
+
+    /// How far off the camera pose may be in (pitch, roll), radians.
+    pub fn camera_sigma(&self) -> Vector2<f64> {
+        self.camera_sigma
     }
 
     /// The frame's camera (of a robot standing at the robot-frame origin: it projects robot-frame
@@ -530,7 +545,8 @@ pub fn detect(
         let stride = points.len() as f64 / MAX_POINTS as f64;
         points = (0..MAX_POINTS).map(|i| points[(i as f64 * stride) as usize]).collect();
     }
-    Ok(FramePercepts { points, intrinsics, camera_pose: *camera_pose, image })
+    let camera_sigma = CameraCalibration::default().sigma;
+    Ok(FramePercepts { points, intrinsics, camera_pose: *camera_pose, camera_sigma, image })
 }
 
 /// The camera of a robot standing at the robot-frame origin, at `pose` turned by `pitch` and `roll`
