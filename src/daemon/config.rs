@@ -717,6 +717,8 @@ mod tests {
         assert!(message("[camera]\nhorizontal_fov_deg = 0.5").contains("camera.horizontal_fov_deg"));
         assert!(message("[camera]\nvertical_fov_deg = 200").contains("camera.vertical_fov_deg"));
         assert!(message("camera_correction = \"yes\"").contains("camera_correction"));
+        assert!(message("learn_calibration = 1").contains("learn_calibration"));
+        assert!(!parse("learn_calibration = false").unwrap().learn_calibration);
         assert!(message("refine = false\nglobal_search = \"always\"").contains("global_search"));
         assert_eq!(parse("global_search = \"when_unsure\"").unwrap().global_search, GlobalSearch::WhenUnsure);
         let lab = parse("field = \"lab.toml\"\n[camera]\nhorizontal_fov_deg = 60").unwrap();
