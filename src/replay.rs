@@ -253,10 +253,8 @@ pub fn replay(
     let mut failed = 0;
     let mut calibration = CalibrationTracker::default();
     for group in recording.records().chunks(burst_size) {
-        let mut burst = match options.learn_calibration {
-            true => pipeline.calibrated_burst(calibration.calibration()),
-            false => pipeline.burst(),
-        };
+        // Without learning the tracker stays at the default calibration, the one `Pipeline::burst` takes.
+        let mut burst = pipeline.calibrated_burst(calibration.calibration());
         for record in group {
             let _frame = tracing::warn_span!("frame", file = %record.file).entered();
             let head_yaw = record.camera.map_or(0.0, |camera| camera.head_yaw());
