@@ -301,6 +301,10 @@ struct ReplayArgs {
     /// Added to every recorded camera roll, degrees.
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true, value_name = "DEG")]
     camera_roll_offset: f64,
+    /// Standard deviation of a further pitch and roll error drawn for every burst, degrees (seeded by
+    /// --prior-seed): a robot's stance moving its camera between bursts, on top of the offsets.
+    #[arg(long, default_value_t = 0.0, value_name = "DEG")]
+    camera_jitter: f64,
     /// With --refine: every burst starts from the recorded camera poses; by default the camera's
     /// calibration error is learnt over the bursts (one robot's recording), as the daemon does.
     #[arg(long)]
@@ -661,6 +665,11 @@ fn replay(args: ReplayArgs) -> anyhow::Result<()> {
     ] {
         anyhow::ensure!(offset.abs() <= 30.0, "{flag} {offset}: expected degrees within ±30");
     }
+    anyhow::ensure!(
+        (0.0..=10.0).contains(&args.camera_jitter),
+        "--camera-jitter {}: expected a standard deviation of 0 to 10 degrees",
+        args.camera_jitter
+    );
     let lab_field = args.field.as_deref().map(|path| load_field(Some(path))).transpose()?;
     let (pipeline, field) = if args.model.is_none() {
         info!(recording = %directory.display(), frames = recording.records().len(), "replaying with the lines alone");
@@ -694,6 +703,7 @@ fn replay(args: ReplayArgs) -> anyhow::Result<()> {
             prior_seed: args.prior_seed,
             min_share: args.min_share,
             camera_offset: (args.camera_pitch_offset.to_radians(), args.camera_roll_offset.to_radians()),
+            camera_jitter: args.camera_jitter.to_radians(),
             learn_calibration: !args.fixed_calibration,
         },
         &mut stdout.lock(),

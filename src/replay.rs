@@ -14,7 +14,7 @@ use crate::eval::{
     TwinMetrics,
 };
 use crate::geometry::{FieldPose, PoseSigma};
-use crate::pipeline::priors::simulate::{PriorSpec, priors_for};
+use crate::pipeline::priors::simulate::{PriorSpec, normal, priors_for};
 use crate::pipeline::{BurstError, Estimate, Pipeline};
 use crate::protocol::message::LineEvidence;
 use crate::recording::{FrameRecord, Recording};
@@ -227,6 +227,9 @@ pub struct ReplayOptions {
     /// Pitch and roll offsets added to every recorded camera pose, radians: a robot's extrinsic
     /// calibration, or a deliberate error to see what one costs.
     pub camera_offset: (f64, f64),
+    /// Standard deviation of a further pitch and roll error drawn afresh for every burst, radians: how
+    /// a robot's stance moves its camera between standing still and standing still (0: none).
+    pub camera_jitter: f64,
     /// Whether the camera's calibration error is learnt over the bursts (one robot's recording), as
     /// the daemon does; otherwise every burst starts from the recorded poses.
     pub learn_calibration: bool,
@@ -252,7 +255,17 @@ pub fn replay(
     let with_priors = !options.priors.is_empty();
     let mut failed = 0;
     let mut calibration = CalibrationTracker::default();
+    // Its own stream, so the priors' draws do not change with the jitter.
+    let mut jitter_rng = ChaCha8Rng::seed_from_u64(options.prior_seed);
+    jitter_rng.set_stream(1);
     for group in recording.records().chunks(burst_size) {
+        let (pitch, roll) = match options.camera_jitter {
+            0.0 => options.camera_offset,
+            jitter => {
+                let (pitch, roll) = options.camera_offset;
+                (pitch + jitter * normal(&mut jitter_rng), roll + jitter * normal(&mut jitter_rng))
+            }
+        };
         // Without learning the tracker stays at the default calibration, the one `Pipeline::burst` takes.
         let mut burst = pipeline.calibrated_burst(calibration.calibration());
         for record in group {
@@ -261,7 +274,6 @@ pub fn replay(
             if pipeline.checks_lines() && record.camera.is_none() {
                 warn!("no camera pose recorded: frame not used for line refinement");
             }
-            let (pitch, roll) = options.camera_offset;
             let result = (|| {
                 let camera = record.camera.map(|camera| camera.corrected(pitch, roll)).transpose();
                 let camera = camera.map_err(|error| format!("the corrected camera pose: {error}"))?;

@@ -194,6 +194,10 @@ fn the_line_fit_corrects_a_camera_pitch_error_and_a_lab_field_is_taken() {
     let trusted = found(&["--camera-pitch-offset", "1", "--exact-camera"]);
     let corrected = found(&["--camera-pitch-offset", "1"]);
     assert!(corrected >= 0.5 && trusted < 0.25 * corrected, "trusted {trusted}, corrected {corrected}");
+    // A stance error drawn afresh for every burst, trusted as recorded, costs the fits as well.
+    let exact = found(&["--exact-camera"]);
+    let jittered = found(&["--camera-jitter", "1.5", "--exact-camera"]);
+    assert!(jittered < 0.75 * exact, "jittered {jittered}, exact {exact}");
     let calibrated = metrics(&[])["refined_share"].as_f64().unwrap();
     let refined_share = |extra: &[&str]| metrics(extra)["refined_share"].as_f64().unwrap();
     // The sample was rendered on the 9 m field: checked against a 7.5 m lab field, most fits fail.
@@ -367,6 +371,8 @@ fn bad_replay_options_are_rejected_with_a_reason() {
         (&["replay", "--field", "/nonexistent/field.toml"][..], "/nonexistent/field.toml"),
         (&["replay", "--horizontal-fov", "0"][..], "--horizontal-fov"),
         (&["replay", "--camera-roll-offset", "45"][..], "--camera-roll-offset"),
+        (&["replay", "--camera-jitter", "NaN"][..], "--camera-jitter"),
+        (&["replay", "--camera-jitter", "11"][..], "--camera-jitter"),
     ] {
         let output = relocd(args);
         assert!(!output.status.success(), "{args:?} should fail");

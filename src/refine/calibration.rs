@@ -9,9 +9,12 @@ use nalgebra::{Matrix2, Vector2};
 
 /// Spread of the whole calibration error before anything is learnt, radians.
 const INITIAL_SIGMA: f64 = 1.0 * std::f64::consts::PI / 180.0;
-/// Spread of the part of the error that changes from burst to burst, radians: joint play and the
-/// torso tilt of a standing Nao (an assumption; rendered frames have none).
-const STANCE_SIGMA: f64 = 0.3 * std::f64::consts::PI / 180.0;
+/// Least spread of the part of the error that changes from burst to burst, radians: joint play and
+/// the torso tilt of a standing Nao (an assumption; rendered frames have none). Where the
+/// measurements scatter more than their own σ explains, the tracker takes the larger spread.
+const MIN_STANCE_SIGMA: f64 = 0.3 * std::f64::consts::PI / 180.0;
+/// Median absolute deviation of a normal distribution per standard deviation.
+const MAD_PER_SIGMA: f64 = 0.674_489_75;
 /// Measurements looser than this (radians, either axis) teach nothing.
 const MAX_MEASUREMENT_SIGMA: f64 = 0.5 * std::f64::consts::PI / 180.0;
 /// The recent measurements the tracker keeps: older ones fall out (a head knocked in a fall).
@@ -74,13 +77,27 @@ impl CameraMeasurement {
 
 /// Learns the lasting part of a camera's calibration error from the bursts' measurements: the
 /// information-weighted mean of the recent measurements that agree with their median, once at
-/// least [`MIN_AGREEING`] do; and gives the calibration each burst's fits start from.
+/// least [`MIN_AGREEING`] do, and the spread of the part that changes from stance to stance; and
+/// gives the calibration each burst's fits start from.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct CalibrationTracker {
     /// The last [`WINDOW`] measurements, oldest first.
     recent: Vec<CameraMeasurement>,
-    /// The learnt offset, its covariance and how many measurements agree on it.
-    learnt: Option<(Vector2<f64>, Matrix2<f64>, usize)>,
+    /// What the recent measurements agree on.
+    learnt: Option<Consensus>,
+}
+
+/// The offset the recent measurements agree on.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Consensus {
+    /// The lasting (pitch, roll) offset, radians.
+    offset: Vector2<f64>,
+    /// Its covariance, radians².
+    covariance: Matrix2<f64>,
+    /// Standard deviation of the stance's part in (pitch, roll), radians.
+    stance: Vector2<f64>,
+    /// How many measurements agree on it.
+    agreeing: usize,
 }
 
 impl CalibrationTracker {
@@ -88,9 +105,10 @@ impl CalibrationTracker {
     /// the stance's; the default where nothing is learnt yet.
     pub fn calibration(&self) -> CameraCalibration {
         match &self.learnt {
-            Some((offset, covariance, _)) => CameraCalibration {
-                correction: *offset,
-                sigma: covariance.diagonal().map(|variance| (variance + STANCE_SIGMA * STANCE_SIGMA).sqrt()),
+            Some(learnt) => CameraCalibration {
+                correction: learnt.offset,
+                sigma: (learnt.covariance.diagonal() + learnt.stance.component_mul(&learnt.stance))
+                    .map(f64::sqrt),
             },
             None => CameraCalibration::default(),
         }
@@ -98,7 +116,7 @@ impl CalibrationTracker {
 
     /// How many of the recent measurements agree on the learnt offset (0: nothing learnt).
     pub fn learnt(&self) -> usize {
-        self.learnt.map_or(0, |(_, _, agreeing)| agreeing)
+        self.learnt.map_or(0, |learnt| learnt.agreeing)
     }
 
     /// Takes one burst's measurement (one that is not finite or looser than
@@ -118,19 +136,27 @@ impl CalibrationTracker {
     }
 
     /// The information-weighted mean of the recent measurements within [`AGREE_SIGMAS`] of their
-    /// median, with its covariance, where at least [`MIN_AGREEING`] agree.
-    fn consensus(&self) -> Option<(Vector2<f64>, Matrix2<f64>, usize)> {
-        let median = |axis: usize| {
-            let mut values: Vec<f64> = self.recent.iter().map(|m| m.correction[axis]).collect();
+    /// median (their own σ and the stance's), with its covariance, where at least [`MIN_AGREEING`]
+    /// agree. The stance's spread is what the measurements scatter about their median beyond their
+    /// own σ (by their median absolute deviation), at least [`MIN_STANCE_SIGMA`].
+    fn consensus(&self) -> Option<Consensus> {
+        let median = |values: &mut Vec<f64>| {
             values.sort_by(f64::total_cmp);
             values[values.len() / 2]
         };
-        let median = Vector2::new(median(0), median(1));
-        let stance = Matrix2::from_diagonal_element(STANCE_SIGMA * STANCE_SIGMA);
+        let axis_median =
+            |value: &dyn Fn(&CameraMeasurement) -> f64| median(&mut self.recent.iter().map(value).collect());
+        let centre = Vector2::new(axis_median(&|m| m.correction.x), axis_median(&|m| m.correction.y));
+        let stance = Vector2::from_fn(|axis, _| {
+            let deviation = axis_median(&|m| (m.correction[axis] - centre[axis]).abs()) / MAD_PER_SIGMA;
+            let own = axis_median(&|m| m.covariance[(axis, axis)]);
+            (deviation * deviation - own).max(MIN_STANCE_SIGMA * MIN_STANCE_SIGMA).sqrt()
+        });
+        let stance_covariance = Matrix2::from_diagonal(&stance.component_mul(&stance));
         let (mut information, mut weighted, mut agreeing) = (Matrix2::zeros(), Vector2::zeros(), 0);
         for measured in &self.recent {
-            let Some(inverse) = (measured.covariance + stance).try_inverse() else { continue };
-            let off = measured.correction - median;
+            let Some(inverse) = (measured.covariance + stance_covariance).try_inverse() else { continue };
+            let off = measured.correction - centre;
             if off.dot(&(inverse * off)) <= AGREE_SIGMAS * AGREE_SIGMAS {
                 information += inverse;
                 weighted += inverse * measured.correction;
@@ -138,24 +164,27 @@ impl CalibrationTracker {
             }
         }
         let covariance = information.try_inverse().filter(|_| agreeing >= MIN_AGREEING)?;
-        Some((covariance * weighted, covariance, agreeing))
+        Some(Consensus { offset: covariance * weighted, covariance, stance, agreeing })
     }
 }
 
 impl std::fmt::Display for CalibrationTracker {
-    /// E.g. `pitch +0.68°, roll -0.41° (σ 0.12°, 0.10°; 9 of the last 12 bursts agree)`.
+    /// E.g. `pitch +0.68°, roll -0.41° (σ 0.12°, 0.10°; stance σ 0.30°, 0.30°; 9 of the last 12 bursts agree)`.
     fn fmt(&self, formatter: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let Some((offset, covariance, agreeing)) = &self.learnt else {
+        let Some(learnt) = &self.learnt else {
             return write!(formatter, "nothing learnt ({} measurements)", self.recent.len());
         };
-        let sigma = covariance.diagonal().map(|variance| variance.max(0.0).sqrt().to_degrees());
+        let sigma = learnt.covariance.diagonal().map(|variance| variance.max(0.0).sqrt().to_degrees());
         write!(
             formatter,
-            "pitch {:+.2}°, roll {:+.2}° (σ {:.2}°, {:.2}°; {agreeing} of the last {} bursts agree)",
-            offset.x.to_degrees(),
-            offset.y.to_degrees(),
+            "pitch {:+.2}°, roll {:+.2}° (σ {:.2}°, {:.2}°; stance σ {:.2}°, {:.2}°; {} of the last {} bursts agree)",
+            learnt.offset.x.to_degrees(),
+            learnt.offset.y.to_degrees(),
             sigma.x,
             sigma.y,
+            learnt.stance.x.to_degrees(),
+            learnt.stance.y.to_degrees(),
+            learnt.agreeing,
             self.recent.len()
         )
     }
@@ -191,9 +220,28 @@ mod tests {
         let learnt = tracker.calibration();
         assert!((learnt.correction - degrees(0.7, -0.4)).amax() < 0.1_f64.to_radians(), "{learnt:?}");
         assert!(learnt.sigma.x < 0.5 * before.sigma.x);
-        // Never tighter than the stance's own error.
-        assert!(learnt.sigma.x > STANCE_SIGMA);
+        // Never tighter than the stance's own error: this scatter is what the measurements' σ explains.
+        assert!(learnt.sigma.x > MIN_STANCE_SIGMA);
+        assert!(tracker.to_string().contains("stance σ 0.30°, 0.30°"), "{tracker}");
         assert!(tracker.to_string().ends_with("10 of the last 10 bursts agree)"), "{tracker}");
+    }
+
+    #[test]
+    fn a_stance_that_moves_the_camera_more_widens_the_prior() {
+        let mut tracker = CalibrationTracker::default();
+        // Sharp measurements (σ 0.1°) scattered about (0.7°, −0.4°) by about 0.6° from stance to stance.
+        let scatter =
+            [-0.9, 0.6, -0.45, 0.3, -0.2, 0.75, 0.0, -0.6, 0.1, 0.2, -0.3, 0.45, -0.1, 0.9, -0.75, 0.05];
+        for (index, scatter) in scatter.iter().enumerate() {
+            tracker.learn(&measurement(0.7 + scatter, -0.4 - scatter, 0.1));
+            assert!(tracker.learnt() > 0 || index + 1 < MIN_AGREEING, "burst {index}: {tracker}");
+        }
+        let learnt = tracker.calibration();
+        assert!((learnt.correction - degrees(0.7, -0.4)).amax() < 0.2_f64.to_radians(), "{tracker}");
+        for sigma in learnt.sigma.iter() {
+            assert!((0.45..0.8).contains(&sigma.to_degrees()), "{tracker}");
+        }
+        assert_eq!(tracker.learnt(), WINDOW, "{tracker}");
     }
 
     #[test]

@@ -130,7 +130,7 @@ fn in_disc(rng: &mut impl Rng, radius: f64) -> Vector2<f64> {
 }
 
 /// A sample of a standard normal (Box–Muller).
-fn normal(rng: &mut impl Rng) -> f64 {
+pub(crate) fn normal(rng: &mut impl Rng) -> f64 {
     let u = 1.0 - rng.random::<f64>();
     (-2.0 * u.ln()).sqrt() * (2.0 * PI * rng.random::<f64>()).cos()
 }
