@@ -234,6 +234,7 @@ struct Pixels<'a> {
 }
 
 impl Pixels<'_> {
+    #[inline]
     fn yuv(&self, x: usize, y: usize) -> Yuv {
         match self.frame {
             Frame::Rgb(image) => {
@@ -242,24 +243,43 @@ impl Pixels<'_> {
                 rgb_to_yuv(raw[0], raw[1], raw[2])
             }
             Frame::Yuyv(image) => {
-                let pair = (y * self.width + (x & !1)) * 2;
-                let bytes = &image.as_bytes()[pair..pair + 4];
-                let luma = if x & 1 == 0 { bytes[0] } else { bytes[2] };
-                (f32::from(luma), f32::from(bytes[1]), f32::from(bytes[3]))
+                let (luma, u, v) = self.yuyv_bytes(image.as_bytes(), x, y);
+                (f32::from(luma), f32::from(u), f32::from(v))
             }
         }
+    }
+
+    /// The Y, U and V bytes of pixel (x, y) of a YUYV frame's `bytes`, widened for sums.
+    #[inline]
+    fn yuyv_bytes(&self, bytes: &[u8], x: usize, y: usize) -> (u16, u16, u16) {
+        let pair = (y * self.width + (x & !1)) * 2;
+        let bytes = &bytes[pair..pair + 4];
+        (u16::from(bytes[(x & 1) * 2]), u16::from(bytes[1]), u16::from(bytes[3]))
     }
 
     /// The mean of three pixels across a scan line at `along` on the scan line at `across`: carpet
     /// texture and chroma noise average out, a line crossing the scan does not.
     fn smoothed(&self, axis: Axis, across: usize, along: usize, limit: usize) -> Yuv {
-        let sample = |offset: usize| match axis {
-            Axis::Vertical => self.yuv(offset, along),
-            Axis::Horizontal => self.yuv(along, offset),
+        let at = |offset: usize| match axis {
+            Axis::Vertical => (offset, along),
+            Axis::Horizontal => (along, offset),
         };
-        let (a, b, c) =
-            (sample(across.saturating_sub(1)), sample(across), sample((across + 1).min(limit - 1)));
-        ((a.0 + b.0 + c.0) / 3.0, (a.1 + b.1 + c.1) / 3.0, (a.2 + b.2 + c.2) / 3.0)
+        let three = [at(across.saturating_sub(1)), at(across), at((across + 1).min(limit - 1))];
+        match self.frame {
+            // Summed as integers: the same sums as in floats, without converting every pixel.
+            Frame::Yuyv(image) => {
+                let bytes = image.as_bytes();
+                let sample = |(x, y): (usize, usize)| self.yuyv_bytes(bytes, x, y);
+                let (a, b, c) = (sample(three[0]), sample(three[1]), sample(three[2]));
+                let mean = |sum: u16| f32::from(sum) / 3.0;
+                (mean(a.0 + b.0 + c.0), mean(a.1 + b.1 + c.1), mean(a.2 + b.2 + c.2))
+            }
+            Frame::Rgb(_) => {
+                let sample = |(x, y): (usize, usize)| self.yuv(x, y);
+                let (a, b, c) = (sample(three[0]), sample(three[1]), sample(three[2]));
+                ((a.0 + b.0 + c.0) / 3.0, (a.1 + b.1 + c.1) / 3.0, (a.2 + b.2 + c.2) / 3.0)
+            }
+        }
     }
 }
 
@@ -421,6 +441,21 @@ fn perspective_width_limit(below: f64) -> f64 {
     (PERSPECTIVE_WIDTH_SLOPE * below).max(MIN_WIDTH_LIMIT)
 }
 
+/// The running mean luma of the carpet pixels (`green`) of `line` met before each pixel, walking it in
+/// `order`; NaN before the first.
+fn running_carpet_luma(line: &[Yuv], green: &[bool], order: impl Iterator<Item = usize>) -> Vec<f32> {
+    let mut means = vec![f32::NAN; line.len()];
+    let mut mean = f32::NAN;
+    for index in order {
+        means[index] = mean;
+        if green[index] {
+            let luma = line[index].0;
+            mean = if mean.is_nan() { luma } else { mean + RUNNING_WEIGHT * (luma - mean) };
+        }
+    }
+    means
+}
+
 /// Which pixels of a scan line are carpet, into `green`. A pixel of the carpet's hue that is clearly
 /// brighter and greyer than the carpet on both sides of it (a running mean from each end) is a blurred
 /// line with the carpet's tint, not carpet; a lone carpet pixel between two others is chroma noise
@@ -428,20 +463,8 @@ fn perspective_width_limit(below: f64) -> f64 {
 fn classify(line: &[Yuv], palette: &Palette, green: &mut Vec<bool>) {
     green.clear();
     green.extend(line.iter().map(|&pixel| palette.is_green(pixel)));
-    let running = |order: &mut dyn Iterator<Item = usize>| {
-        let mut means = vec![f32::NAN; line.len()];
-        let mut mean = f32::NAN;
-        for index in order {
-            means[index] = mean;
-            if green[index] {
-                let luma = line[index].0;
-                mean = if mean.is_nan() { luma } else { mean + RUNNING_WEIGHT * (luma - mean) };
-            }
-        }
-        means
-    };
-    let from_start = running(&mut (0..line.len()));
-    let from_end = running(&mut (0..line.len()).rev());
+    let from_start = running_carpet_luma(line, green, 0..line.len());
+    let from_end = running_carpet_luma(line, green, (0..line.len()).rev());
     for index in 0..line.len() {
         let carpet = from_start[index].max(from_end[index]);
         if green[index]

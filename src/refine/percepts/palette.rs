@@ -91,12 +91,15 @@ impl Palette {
             ((turn * HUE_BINS as f32) as usize).min(HUE_BINS - 1)
         };
         // Greenish, with some chroma: the candidates, weighted towards the bottom of the image.
-        let greenish: Vec<(usize, Yuv)> =
-            samples.iter().copied().filter(|&(_, yuv)| is_greenish(yuv)).collect();
+        let greenish: Vec<(usize, Yuv, f32)> = samples
+            .iter()
+            .filter(|&&(_, yuv)| is_greenish(yuv))
+            .map(|&(row, yuv)| (row, yuv, hue_of(yuv)))
+            .collect();
         let mut histogram = [0.0f32; HUE_BINS];
-        for &(row, yuv) in &greenish {
+        for &(row, _, hue) in &greenish {
             let depth = row as f32 / height as f32;
-            histogram[bin_of(hue_of(yuv))] += 1.0 + 4.0 * depth * depth;
+            histogram[bin_of(hue)] += 1.0 + 4.0 * depth * depth;
         }
         let smoothed = |bin: usize| {
             histogram[(bin + HUE_BINS - 1) % HUE_BINS] + histogram[bin] + histogram[(bin + 1) % HUE_BINS]
@@ -105,8 +108,8 @@ impl Palette {
         let peak_hue = (peak as f32 + 0.5) / HUE_BINS as f32 * std::f32::consts::TAU;
         let members: Vec<Yuv> = greenish
             .iter()
-            .map(|&(_, yuv)| yuv)
-            .filter(|&yuv| angle_between(hue_of(yuv), peak_hue) <= HUE_TOLERANCE / 2.0)
+            .filter(|&&(_, _, hue)| angle_between(hue, peak_hue) <= HUE_TOLERANCE / 2.0)
+            .map(|&(_, yuv, _)| yuv)
             .collect();
         if (members.len() as f64) < MIN_CARPET_SHARE * samples.len() as f64 {
             return None;
