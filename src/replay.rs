@@ -228,7 +228,7 @@ pub struct ReplayOptions {
     /// calibration, or a deliberate error to see what one costs.
     pub camera_offset: (f64, f64),
     /// Standard deviation of a further pitch and roll error drawn afresh for every burst, radians: how
-    /// a robot's stance moves its camera between standing still and standing still (0: none).
+    /// a robot's stance moves its camera from one burst to the next (0: none).
     pub camera_jitter: f64,
     /// Whether the camera's calibration error is learnt over the bursts (one robot's recording), as
     /// the daemon does; otherwise every burst starts from the recorded poses.
