@@ -257,6 +257,45 @@ impl Pixels<'_> {
         (u16::from(bytes[(x & 1) * 2]), u16::from(bytes[1]), u16::from(bytes[3]))
     }
 
+    /// The whole scan line of [`Self::smoothed`] pixels at `across` (a column for
+    /// [`Axis::Vertical`], a row otherwise), `length` pixels along it and `limit` across, into `line`.
+    /// A YUYV frame is read a row at a time rather than pixel by pixel (the same sums).
+    fn scan_line(&self, axis: Axis, across: usize, (length, limit): (usize, usize), line: &mut Vec<Yuv>) {
+        line.clear();
+        let Frame::Yuyv(image) = self.frame else {
+            line.extend((0..length).map(|along| self.smoothed(axis, across, along, limit)));
+            return;
+        };
+        let (bytes, stride) = (image.as_bytes(), 2 * self.width);
+        let neighbours = [across.saturating_sub(1), across, (across + 1).min(limit - 1)];
+        let mean = |a: u8, b: u8, c: u8| f32::from(u16::from(a) + u16::from(b) + u16::from(c)) / 3.0;
+        match axis {
+            // Three pixels side by side in every row: a pixel's luma is byte 2x, its pair's U and V
+            // follow the pair's first luma.
+            Axis::Vertical => {
+                let [a, b, c] = neighbours;
+                let [pa, pb, pc] = neighbours.map(|x| (x & !1) * 2);
+                line.extend(bytes.chunks_exact(stride).take(length).map(|row| {
+                    (
+                        mean(row[2 * a], row[2 * b], row[2 * c]),
+                        mean(row[pa + 1], row[pb + 1], row[pc + 1]),
+                        mean(row[pa + 3], row[pb + 3], row[pc + 3]),
+                    )
+                }));
+            }
+            // Three rows, a pixel pair (four bytes) at a time.
+            Axis::Horizontal => {
+                let [above, row, below] =
+                    neighbours.map(|y| bytes[y * stride..(y + 1) * stride].chunks_exact(4));
+                let pairs = above.zip(row).zip(below).flat_map(|((a, b), c)| {
+                    let (u, v) = (mean(a[1], b[1], c[1]), mean(a[3], b[3], c[3]));
+                    [(mean(a[0], b[0], c[0]), u, v), (mean(a[2], b[2], c[2]), u, v)]
+                });
+                line.extend(pairs.take(length));
+            }
+        }
+    }
+
     /// The mean of three pixels across a scan line at `along` on the scan line at `across`: carpet
     /// texture and chroma noise average out, a line crossing the scan does not.
     fn smoothed(&self, axis: Axis, across: usize, along: usize, limit: usize) -> Yuv {
@@ -329,8 +368,7 @@ pub fn detect_in_image(frame: &Frame) -> Result<ImagePercepts, PerceptError> {
     let mut vertical: Vec<(usize, Crossing)> = Vec::new();
     let mut tops = Vec::with_capacity(columns.len());
     for (index, &column) in columns.iter().enumerate() {
-        line.clear();
-        line.extend((0..height_px).map(|row| pixels.smoothed(Axis::Vertical, column, row, width_px)));
+        pixels.scan_line(Axis::Vertical, column, (height_px, width_px), &mut line);
         classify(&line, &palette, &mut green);
         tops.push(scan::carpet_top(&line, &green, &palette).unwrap_or(height_px));
         image.hidden.extend(rows.iter().map(|&row| !green[row] && !palette.looks_like_paint(line[row])));
@@ -350,8 +388,7 @@ pub fn detect_in_image(frame: &Frame) -> Result<ImagePercepts, PerceptError> {
         .map(|(index, crossing)| (Axis::Vertical, columns[index], crossing))
         .collect();
     for &row in &rows {
-        line.clear();
-        line.extend((0..width_px).map(|column| pixels.smoothed(Axis::Horizontal, row, column, height_px)));
+        pixels.scan_line(Axis::Horizontal, row, (width_px, height_px), &mut line);
         classify(&line, &palette, &mut green);
         for crossing in scan::crossings(&line, &green, &palette, max_width) {
             // The carpet on both sides reaches above the crossing (a wide line along a column cuts
@@ -595,6 +632,23 @@ fn ground_width_fits(camera: &Camera, crossing: &LineCrossing, line_width: f64) 
 mod tests {
     use super::*;
     use image::{Rgb, RgbImage};
+
+    #[test]
+    fn a_yuyv_scan_line_is_its_pixels_smoothed_one_by_one() {
+        let (width, height) = (10usize, 6usize);
+        let data: Vec<u8> = (0..width * height * 2).map(|i| (i * 37 % 251) as u8).collect();
+        let frame = Frame::Yuyv(crate::frame::YuyvImage::new(width as u32, height as u32, data).unwrap());
+        let pixels = Pixels { frame: &frame, width };
+        let mut line = Vec::new();
+        for (axis, length, limit) in [(Axis::Vertical, height, width), (Axis::Horizontal, width, height)] {
+            for across in 0..limit {
+                pixels.scan_line(axis, across, (length, limit), &mut line);
+                let one_by_one: Vec<Yuv> =
+                    (0..length).map(|along| pixels.smoothed(axis, across, along, limit)).collect();
+                assert_eq!(line, one_by_one, "{axis:?} {across}");
+            }
+        }
+    }
 
     #[test]
     fn what_stands_on_the_carpet_hides_the_lines_behind_it() {
