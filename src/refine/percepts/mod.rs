@@ -234,7 +234,6 @@ struct Pixels<'a> {
 }
 
 impl Pixels<'_> {
-    #[inline]
     fn yuv(&self, x: usize, y: usize) -> Yuv {
         match self.frame {
             Frame::Rgb(image) => {
@@ -243,23 +242,18 @@ impl Pixels<'_> {
                 rgb_to_yuv(raw[0], raw[1], raw[2])
             }
             Frame::Yuyv(image) => {
-                let (luma, u, v) = self.yuyv_bytes(image.as_bytes(), x, y);
-                (f32::from(luma), f32::from(u), f32::from(v))
+                let pair = (y * self.width + (x & !1)) * 2;
+                let bytes = &image.as_bytes()[pair..pair + 4];
+                let luma = if x & 1 == 0 { bytes[0] } else { bytes[2] };
+                (f32::from(luma), f32::from(bytes[1]), f32::from(bytes[3]))
             }
         }
     }
 
-    /// The Y, U and V bytes of pixel (x, y) of a YUYV frame's `bytes`, widened for sums.
-    #[inline]
-    fn yuyv_bytes(&self, bytes: &[u8], x: usize, y: usize) -> (u16, u16, u16) {
-        let pair = (y * self.width + (x & !1)) * 2;
-        let bytes = &bytes[pair..pair + 4];
-        (u16::from(bytes[(x & 1) * 2]), u16::from(bytes[1]), u16::from(bytes[3]))
-    }
-
     /// The whole scan line of [`Self::smoothed`] pixels at `across` (a column for
     /// [`Axis::Vertical`], a row otherwise), `length` pixels along it and `limit` across, into `line`.
-    /// A YUYV frame is read a row at a time rather than pixel by pixel (the same sums).
+    /// A YUYV frame is read a row at a time rather than pixel by pixel: the same sums, in integers
+    /// (exact, as they are in floats).
     fn scan_line(&self, axis: Axis, across: usize, (length, limit): (usize, usize), line: &mut Vec<Yuv>) {
         line.clear();
         let Frame::Yuyv(image) = self.frame else {
@@ -299,26 +293,13 @@ impl Pixels<'_> {
     /// The mean of three pixels across a scan line at `along` on the scan line at `across`: carpet
     /// texture and chroma noise average out, a line crossing the scan does not.
     fn smoothed(&self, axis: Axis, across: usize, along: usize, limit: usize) -> Yuv {
-        let at = |offset: usize| match axis {
-            Axis::Vertical => (offset, along),
-            Axis::Horizontal => (along, offset),
+        let sample = |offset: usize| match axis {
+            Axis::Vertical => self.yuv(offset, along),
+            Axis::Horizontal => self.yuv(along, offset),
         };
-        let three = [at(across.saturating_sub(1)), at(across), at((across + 1).min(limit - 1))];
-        match self.frame {
-            // Summed as integers: the same sums as in floats, without converting every pixel.
-            Frame::Yuyv(image) => {
-                let bytes = image.as_bytes();
-                let sample = |(x, y): (usize, usize)| self.yuyv_bytes(bytes, x, y);
-                let (a, b, c) = (sample(three[0]), sample(three[1]), sample(three[2]));
-                let mean = |sum: u16| f32::from(sum) / 3.0;
-                (mean(a.0 + b.0 + c.0), mean(a.1 + b.1 + c.1), mean(a.2 + b.2 + c.2))
-            }
-            Frame::Rgb(_) => {
-                let sample = |(x, y): (usize, usize)| self.yuv(x, y);
-                let (a, b, c) = (sample(three[0]), sample(three[1]), sample(three[2]));
-                ((a.0 + b.0 + c.0) / 3.0, (a.1 + b.1 + c.1) / 3.0, (a.2 + b.2 + c.2) / 3.0)
-            }
-        }
+        let (a, b, c) =
+            (sample(across.saturating_sub(1)), sample(across), sample((across + 1).min(limit - 1)));
+        ((a.0 + b.0 + c.0) / 3.0, (a.1 + b.1 + c.1) / 3.0, (a.2 + b.2 + c.2) / 3.0)
     }
 }
 
