@@ -6,12 +6,12 @@
 //!   saturation learnt from the frame itself, weighted towards its bottom ([`palette`]); the field's
 //!   border in each column is where walking up from the bottom stops paying off (a greenish wall or a
 //!   crowd above the field is not carpet); a line crossing is a short run brighter than the carpet
-//!   right beside it, by a share of that carpet's brightness and by more than its texture, and grey,
-//!   with carpet beside it for its width where another bright run follows ([`scan`]), so sun patches,
-//!   shadows, backlight and blurred lines with the carpet's tint are judged locally, and sunlit bands
-//!   between thin shadows are not lines. A crossing must continue on the neighbouring parallel scan lines (on both sides,
-//!   or further along one where a line ends): a painted line does, a ball's patch, a foot or a speck does
-//!   not; it may be no wider than its distance below the border allows; and it must line up with the
+//!   right beside it, by a share of that carpet's brightness (less where the sensor clips near white)
+//!   and by more than its texture, and grey, with carpet beside it for its width where another bright
+//!   run follows ([`scan`]), so sun patches, shadows, backlight, overexposure and blurred lines with the
+//!   carpet's tint are judged locally, and sunlit bands between thin shadows are not lines. A crossing
+//!   must continue on the neighbouring parallel scan lines (on both sides, or further along one where
+//!   a line ends): a painted line does, a ball's patch, a foot or a speck does not; it may be no wider than its distance below the border allows; and it must line up with the
 //!   crossings of the neighbouring scan lines ([`chains`]): sunlit specks of carpet texture and bright
 //!   blotches continue in their pixels but not as a line.
 //! - On the ground ([`detect`]): a crossing is kept when its width on the ground fits a painted line

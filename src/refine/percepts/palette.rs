@@ -24,8 +24,12 @@ const GREEN_SATURATION_SHARE: f32 = 0.5;
 const MAX_GREEN_SATURATION: f32 = 2.0;
 /// A line pixel has at most this share of the carpet's chroma per luma (plus sensor noise).
 const WHITE_SATURATION_SHARE: f32 = 0.6;
-/// Paint seen without its neighbourhood is at least this many times the carpet's median luma.
+/// Paint seen without its neighbourhood is at least this many times the carpet's median luma…
 const PAINT_LUMA_FACTOR: f32 = 1.3;
+/// …or, on a carpet so bright that this is beyond the sensor's white, this share of the way there.
+const PAINT_HEADROOM_SHARE: f32 = 0.5;
+/// The brightest luma the camera records, 8-bit levels.
+pub(super) const SENSOR_WHITE: f32 = 255.0;
 /// Chroma every pixel may show from sensor noise alone, 8-bit levels.
 const CHROMA_NOISE: f32 = 5.0;
 
@@ -67,7 +71,8 @@ impl Palette {
     /// Whether a pixel could be white paint in the frame's light: grey and clearly brighter than the
     /// carpet's median (a grey robot or a wall in the same light is not).
     pub(super) fn looks_like_paint(&self, pixel: Yuv) -> bool {
-        self.is_unsaturated(pixel) && pixel.0 >= PAINT_LUMA_FACTOR * self.green_luma
+        let headroom = self.green_luma + PAINT_HEADROOM_SHARE * (SENSOR_WHITE - self.green_luma);
+        self.is_unsaturated(pixel) && pixel.0 >= (PAINT_LUMA_FACTOR * self.green_luma).min(headroom)
     }
 
     /// Learns the carpet from a sparse grid of `pixel(x, y)` over a `width` × `height` frame; `None`

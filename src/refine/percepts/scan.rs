@@ -4,7 +4,7 @@
 //! patch, in a robot's shadow or in a backlit frame is brighter than its own neighbouring carpet by a
 //! share of that carpet's brightness, whatever the rest of the frame does.
 
-use super::palette::{Palette, Yuv};
+use super::palette::{Palette, SENSOR_WHITE, Yuv};
 
 /// Carpet pixels on each side of a crossing that give its local reference brightness.
 const SIDE_PIXELS: usize = 6;
@@ -15,8 +15,11 @@ const SIDE_PIXELS: usize = 6;
 const MIN_SIDE_PIXELS: usize = 2;
 /// A line pixel is at least this share brighter than the carpet beside it…
 const MIN_CONTRAST_SHARE: f32 = 0.2;
-/// …and at least this many 8-bit levels.
+/// …and at least this many 8-bit levels…
 const MIN_CONTRAST: f32 = 10.0;
+/// …but, where the share asks for more, at most this share of the levels left above the carpet before
+/// the sensor clips: on an overexposed carpet the paint saturates too, and the step it can show shrinks.
+const HEADROOM_SHARE: f32 = 0.5;
 /// …and at least this many times the carpet's texture beside it (a sunlit blade is not paint).
 const TEXTURE_CONTRAST: f32 = 3.0;
 /// Non-line pixels allowed between a line's bright core and the carpet beside it (blurred edges), or
@@ -104,7 +107,8 @@ pub(super) fn crossings(
 
 /// The brightness a line pixel reaches beside carpet of luma `carpet`.
 pub(super) fn threshold(carpet: f32) -> f32 {
-    carpet + (MIN_CONTRAST_SHARE * carpet).max(MIN_CONTRAST)
+    let headroom = HEADROOM_SHARE * (SENSOR_WHITE - carpet);
+    carpet + (MIN_CONTRAST_SHARE * carpet).min(headroom).max(MIN_CONTRAST)
 }
 
 /// Whether a pixel belongs to a line whose pixels must reach `threshold`: bright and grey.
@@ -210,6 +214,21 @@ mod tests {
             let found = crossings(&pixels, &green, &palette(), 10);
             assert_eq!(found.len(), 1, "light {light}");
             assert_eq!((found[0].start, found[0].end), (8, 11));
+        }
+    }
+
+    #[test]
+    fn a_line_is_found_on_an_overexposed_carpet() {
+        // The carpet near the sensor's white: the paint clips at 255 and can show only ~35 levels more
+        // than it, less than a fifth of the carpet's brightness; a pale carpet speck still is no line.
+        let carpet = [195, 238, 190];
+        let palette = Palette::learn(64, 64, |_, _| rgb_to_yuv(carpet[0], carpet[1], carpet[2])).unwrap().0;
+        for (paint, lines) in [([250, 255, 250], 1), ([205, 245, 203], 0)] {
+            let mut colours = [carpet; 20];
+            colours[8..11].fill(paint);
+            let pixels: Vec<Yuv> = colours.iter().map(|c| rgb_to_yuv(c[0], c[1], c[2])).collect();
+            let green: Vec<bool> = pixels.iter().map(|&p| palette.is_green(p)).collect();
+            assert_eq!(crossings(&pixels, &green, &palette, 10).len(), lines, "{paint:?}");
         }
     }
 
