@@ -282,7 +282,7 @@ struct ReplayArgs {
     refine: bool,
     /// With --refine: when the lines also look for places all over the field (never, when_unsure:
     /// when the network's heaviest hypothesis is not refined, or always).
-    #[arg(long, default_value = "never", value_name = "WHEN")]
+    #[arg(long, default_value = "when_unsure", value_name = "WHEN")]
     global_search: GlobalSearch,
     /// With --refine: the field description file (TOML or JSON, see `relocd field`) whose lines the
     /// frames are checked against, e.g. a lab's field [default: the model contract's field].
@@ -479,7 +479,7 @@ fn run(args: RunArgs, log_level: Option<String>) -> anyhow::Result<()> {
     config.camera.head_yaw_deg = args.head_yaw.unwrap_or(config.camera.head_yaw_deg);
     config.field = args.field.or(config.field);
     if args.no_refine {
-        (config.refine, config.global_search) = (false, GlobalSearch::Never);
+        config.refine = false;
     }
     config.log_level = log_level.unwrap_or(config.log_level);
     if !args.publish.is_empty() {

@@ -198,14 +198,13 @@ fn the_line_fit_corrects_a_camera_pitch_error_and_a_lab_field_is_taken() {
     let exact = found(&["--exact-camera"]);
     let jittered = found(&["--camera-jitter", "1.5", "--exact-camera"]);
     assert!(jittered < 0.75 * exact, "jittered {jittered}, exact {exact}");
-    let calibrated = metrics(&[])["refined_share"].as_f64().unwrap();
-    let refined_share = |extra: &[&str]| metrics(extra)["refined_share"].as_f64().unwrap();
-    // The sample was rendered on the 9 m field: checked against a 7.5 m lab field, most fits fail.
+    // The sample was rendered on the 9 m field: checked against a 7.5 m lab field, most fits fail
+    // (the global search may still fit some views elsewhere on the lab field: not at the truth).
     let field = dir.path().join("field.toml");
     let description = stdout(&relocd(&["field"])).replace("field_length = 9.0", "field_length = 7.5");
     std::fs::write(&field, description).unwrap();
-    let lab = refined_share(&["--field", field.to_str().unwrap()]);
-    assert!(lab < 0.75 * calibrated, "on a lab field: {lab} refined, on its own: {calibrated}");
+    let (own, lab) = (found(&[]), found(&["--field", field.to_str().unwrap()]));
+    assert!(lab < 0.75 * own, "on a lab field: {lab} found, on its own: {own}");
 }
 
 #[test]

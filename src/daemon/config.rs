@@ -89,8 +89,8 @@ pub struct Config {
     pub max_datagram_bytes: usize,
     /// Verify and refine the hypotheses against the field lines in the burst's frames.
     pub refine: bool,
-    /// With `refine`: when the lines also look for places all over the field, beyond the network's
-    /// hypotheses (`never`, `when_unsure`, `always`).
+    /// With `refine` (ignored without): when the lines also look for places all over the field,
+    /// beyond the network's hypotheses (`never`, `when_unsure`, `always`).
     pub global_search: GlobalSearch,
     /// With `refine`: the line fits also estimate a small correction of the camera's pitch and roll
     /// (a robot's calibration is never exact).
@@ -185,12 +185,6 @@ impl Config {
         }
         if !(256..=65_507).contains(&self.max_datagram_bytes) {
             return invalid("max_datagram_bytes", "must lie in 256..=65507 (the largest UDP payload)");
-        }
-        if !self.refine && self.global_search != GlobalSearch::Never {
-            return invalid(
-                "global_search",
-                "the global search is part of line refinement: needs refine = true",
-            );
         }
         if !(1..=1000).contains(&self.frames.queue) {
             return invalid("frames.queue", "must lie in 1..=1000");
@@ -719,8 +713,8 @@ mod tests {
         assert!(message("camera_correction = \"yes\"").contains("camera_correction"));
         assert!(message("learn_calibration = 1").contains("learn_calibration"));
         assert!(!parse("learn_calibration = false").unwrap().learn_calibration);
-        assert!(message("refine = false\nglobal_search = \"always\"").contains("global_search"));
-        assert_eq!(parse("global_search = \"when_unsure\"").unwrap().global_search, GlobalSearch::WhenUnsure);
+        assert_eq!(parse("global_search = \"always\"").unwrap().global_search, GlobalSearch::Always);
+        assert!(parse("refine = false").is_ok(), "the default search needs no refine = true");
         let lab = parse("field = \"lab.toml\"\n[camera]\nhorizontal_fov_deg = 60").unwrap();
         assert_eq!(lab.field, Some(PathBuf::from("lab.toml")));
         let intrinsics = lab.camera.intrinsics(CameraIntrinsics::nao_top()).unwrap().unwrap();

@@ -360,11 +360,11 @@ pub fn fuse(predictions: &[Prediction]) -> Result<Estimate, FusionError> {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum GlobalSearch {
-    /// Never: the lines only check the network's hypotheses (the default until the search is measured
-    /// on held-out sets).
-    #[default]
+    /// Never: the lines only check the network's hypotheses.
     Never,
-    /// When the lines do not refine the network's heaviest hypothesis (contradicted or partial).
+    /// When the lines do not refine the network's heaviest hypothesis (contradicted or partial): the
+    /// default, measured on held-out sets (BENCHMARKS.md, "Global search on fresh seeds").
+    #[default]
     WhenUnsure,
     /// After every burst with enough line points (also catches a refinement that locked onto the
     /// wrong one of several places that look alike).

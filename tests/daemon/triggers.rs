@@ -227,7 +227,9 @@ fn forwarded_frames_are_used_and_a_lying_header_is_dropped() {
     daemon.control(br#"{"relocalise": {}}"#);
     let message = daemon.message();
     assert_eq!(message.frames.used, 2, "{:?}", message.failure);
-    assert_eq!(message.hypotheses.len(), 2);
+    // The network's two twins, or every place the lines fit and its twin.
+    let count = message.hypotheses.len();
+    assert!(count >= 2 && count % 2 == 0, "{count} hypotheses");
     assert_eq!(daemon.status()["rejected"]["frames"], 2, "the lying header and the tilted frame");
     sender.join().unwrap();
     daemon.stop();
