@@ -11,9 +11,10 @@
 //!   run follows ([`scan`]), so sun patches, shadows, backlight, overexposure and blurred lines with the
 //!   carpet's tint are judged locally, and sunlit bands between thin shadows are not lines. A crossing
 //!   must continue on the neighbouring parallel scan lines (on both sides, or further along one where
-//!   a line ends): a painted line does, a ball's patch, a foot or a speck does not; it may be no wider than its distance below the border allows; and it must line up with the
-//!   crossings of the neighbouring scan lines ([`chains`]): sunlit specks of carpet texture and bright
-//!   blotches continue in their pixels but not as a line.
+//!   a line ends): a painted line does, a ball's patch, a foot or a speck does not; it may be no wider
+//!   than its distance below the border allows; and it must line up with the crossings of the
+//!   neighbouring scan lines ([`chains`]): sunlit specks of carpet texture and bright blotches
+//!   continue in their pixels but not as a line.
 //! - On the ground ([`detect`]): a crossing is kept when its width on the ground fits a painted line
 //!   (a robot's leg or a ball, standing above the ground, projects far wider) under the camera pose or
 //!   a pose a few degrees of pitch away (what a real robot's joint sensors may be off by), and its
