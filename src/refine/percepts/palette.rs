@@ -24,12 +24,14 @@ const GREEN_SATURATION_SHARE: f32 = 0.5;
 const MAX_GREEN_SATURATION: f32 = 2.0;
 /// A line pixel has at most this share of the carpet's chroma per luma (plus sensor noise).
 const WHITE_SATURATION_SHARE: f32 = 0.6;
-/// Paint seen without its neighbourhood is at least this many times the carpet's median luma…
-const PAINT_LUMA_FACTOR: f32 = 1.3;
-/// …or, on a carpet so bright that this is beyond the sensor's white, this share of the way there.
-const PAINT_HEADROOM_SHARE: f32 = 0.5;
+/// Paint seen without its neighbourhood is at least this share brighter than the carpet's median luma
+/// (see [`brighter_by`]).
+const PAINT_LUMA_SHARE: f32 = 0.3;
+/// Of the levels left above a carpet before the sensor's white, the most a brightness share may ask
+/// for: on an overexposed carpet the paint saturates too, and the step it can show shrinks.
+const HEADROOM_SHARE: f32 = 0.5;
 /// The brightest luma the camera records, 8-bit levels.
-pub(super) const SENSOR_WHITE: f32 = 255.0;
+const SENSOR_WHITE: f32 = 255.0;
 /// Chroma every pixel may show from sensor noise alone, 8-bit levels.
 const CHROMA_NOISE: f32 = 5.0;
 
@@ -71,8 +73,7 @@ impl Palette {
     /// Whether a pixel could be white paint in the frame's light: grey and clearly brighter than the
     /// carpet's median (a grey robot or a wall in the same light is not).
     pub(super) fn looks_like_paint(&self, pixel: Yuv) -> bool {
-        let headroom = self.green_luma + PAINT_HEADROOM_SHARE * (SENSOR_WHITE - self.green_luma);
-        self.is_unsaturated(pixel) && pixel.0 >= (PAINT_LUMA_FACTOR * self.green_luma).min(headroom)
+        self.is_unsaturated(pixel) && pixel.0 >= brighter_by(self.green_luma, PAINT_LUMA_SHARE)
     }
 
     /// Learns the carpet from a sparse grid of `pixel(x, y)` over a `width` × `height` frame; `None`
@@ -135,6 +136,12 @@ impl Palette {
         let carpet = samples.iter().filter(|&&(_, yuv)| palette.is_green(yuv)).count();
         Some((palette, carpet as f64 / samples.len() as f64))
     }
+}
+
+/// `luma` raised by `share` of itself, or by `HEADROOM_SHARE` of the levels left below the sensor's
+/// white where that is less.
+pub(super) fn brighter_by(luma: f32, share: f32) -> f32 {
+    luma + (share * luma).min(HEADROOM_SHARE * (SENSOR_WHITE - luma))
 }
 
 /// Green above red and blue, bright enough and coloured enough to carry a hue.

@@ -4,7 +4,7 @@
 //! patch, in a robot's shadow or in a backlit frame is brighter than its own neighbouring carpet by a
 //! share of that carpet's brightness, whatever the rest of the frame does.
 
-use super::palette::{Palette, SENSOR_WHITE, Yuv};
+use super::palette::{Palette, Yuv, brighter_by};
 
 /// Carpet pixels on each side of a crossing that give its local reference brightness.
 const SIDE_PIXELS: usize = 6;
@@ -13,13 +13,11 @@ const SIDE_PIXELS: usize = 6;
 /// width (up to `SIDE_PIXELS`): painted lines lie far apart, while sunlit bands between a window
 /// frame's thin shadows are as narrow as the shadows between them.
 const MIN_SIDE_PIXELS: usize = 2;
-/// A line pixel is at least this share brighter than the carpet beside it…
+/// A line pixel is at least this share brighter than the carpet beside it (less near the sensor's
+/// white, see [`brighter_by`])…
 const MIN_CONTRAST_SHARE: f32 = 0.175;
 /// …and at least this many 8-bit levels…
 const MIN_CONTRAST: f32 = 10.0;
-/// …but, where the share asks for more, at most this share of the levels left above the carpet before
-/// the sensor clips: on an overexposed carpet the paint saturates too, and the step it can show shrinks.
-const HEADROOM_SHARE: f32 = 0.5;
 /// …and at least this many times the carpet's texture beside it (a sunlit blade is not paint).
 const TEXTURE_CONTRAST: f32 = 3.0;
 /// Non-line pixels allowed between a line's bright core and the carpet beside it (blurred edges), or
@@ -107,8 +105,7 @@ pub(super) fn crossings(
 
 /// The brightness a line pixel reaches beside carpet of luma `carpet`.
 pub(super) fn threshold(carpet: f32) -> f32 {
-    let headroom = HEADROOM_SHARE * (SENSOR_WHITE - carpet);
-    carpet + (MIN_CONTRAST_SHARE * carpet).min(headroom).max(MIN_CONTRAST)
+    brighter_by(carpet, MIN_CONTRAST_SHARE).max(carpet + MIN_CONTRAST)
 }
 
 /// Whether a pixel belongs to a line whose pixels must reach `threshold`: bright and grey.
@@ -190,12 +187,20 @@ mod tests {
     const PAINT: [u8; 3] = [230, 235, 230];
 
     fn palette() -> Palette {
-        let (r, g, b) = (CARPET[0], CARPET[1], CARPET[2]);
+        palette_of(CARPET)
+    }
+
+    /// The palette learnt from a frame all of `carpet`.
+    fn palette_of([r, g, b]: [u8; 3]) -> Palette {
         Palette::learn(64, 64, |_, _| rgb_to_yuv(r, g, b)).unwrap().0
     }
 
     fn line(colours: &[[u8; 3]]) -> (Vec<Yuv>, Vec<bool>) {
-        let palette = palette();
+        line_on(&palette(), colours)
+    }
+
+    /// The pixels of `colours` and which of them are carpet under `palette`.
+    fn line_on(palette: &Palette, colours: &[[u8; 3]]) -> (Vec<Yuv>, Vec<bool>) {
         let pixels: Vec<Yuv> = colours.iter().map(|c| rgb_to_yuv(c[0], c[1], c[2])).collect();
         let green = pixels.iter().map(|&p| palette.is_green(p)).collect();
         (pixels, green)
@@ -223,12 +228,11 @@ mod tests {
         // than it, less than the share of the carpet's brightness asked for elsewhere; a pale carpet
         // speck still is no line.
         let carpet = [195, 238, 190];
-        let palette = Palette::learn(64, 64, |_, _| rgb_to_yuv(carpet[0], carpet[1], carpet[2])).unwrap().0;
+        let palette = palette_of(carpet);
         for (paint, lines) in [([250, 255, 250], 1), ([205, 245, 203], 0)] {
             let mut colours = [carpet; 20];
             colours[8..11].fill(paint);
-            let pixels: Vec<Yuv> = colours.iter().map(|c| rgb_to_yuv(c[0], c[1], c[2])).collect();
-            let green: Vec<bool> = pixels.iter().map(|&p| palette.is_green(p)).collect();
+            let (pixels, green) = line_on(&palette, &colours);
             assert_eq!(crossings(&pixels, &green, &palette, 10).len(), lines, "{paint:?}");
         }
     }
