@@ -27,7 +27,7 @@ pub use percepts::{
 
 use crate::frame::Frame;
 use crate::geometry::angle::angle_distance;
-use crate::geometry::{CameraIntrinsics, CameraPose, FieldModel, FieldPose, PoseSigma, Symmetry};
+use crate::geometry::{Camera, CameraIntrinsics, CameraPose, FieldModel, FieldPose, PoseSigma, Symmetry};
 use optimise::{Observation, Prior, fit};
 use search::{Region, SearchMap};
 
@@ -385,7 +385,7 @@ impl LineRefiner {
                 let Some(pixel) = camera.project(&Point3::new(ground.x, ground.y, 0.0)) else {
                     continue;
                 };
-                if !frame.searched(&pixel) {
+                if !frame.searched(&pixel, self.width_in_pixels(&camera, &ground, &pixel)) {
                     continue;
                 }
                 expected += 1;
@@ -394,6 +394,16 @@ impl LineRefiner {
             }
         }
         (expected >= MIN_EXPECTED).then(|| unseen as f64 / expected as f64)
+    }
+
+    /// How wide, in pixels, a painted line at `ground` (robot frame) looks at `pixel` under `camera`:
+    /// the larger image step of a line width along either ground axis (at most √2 too wide).
+    fn width_in_pixels(&self, camera: &Camera, ground: &Point2<f64>, pixel: &Point2<f64>) -> f64 {
+        [Vector2::new(self.line_width, 0.0), Vector2::new(0.0, self.line_width)]
+            .iter()
+            .filter_map(|step| camera.project(&Point3::new(ground.x + step.x, ground.y + step.y, 0.0)))
+            .map(|stepped| (stepped - pixel).norm())
+            .fold(0.0, f64::max)
     }
 }
 

@@ -35,6 +35,9 @@ use scan::Crossing;
 
 /// Scan lines per image width (and the same spacing vertically).
 const SCAN_LINES_PER_WIDTH: u32 = 80;
+/// Scan spacings from the image's edge, beyond a line's half width, within which a line is not
+/// expected to be found (see [`FramePercepts::searched`]).
+const EDGE_SCAN_LINES: f64 = 2.0;
 /// Widest line crossing in the image, as a share of its width (a line at the robot's feet).
 const MAX_CROSSING_SHARE: f64 = 0.2;
 /// Pixels of line width allowed per pixel below the carpet's top edge (see
@@ -213,11 +216,15 @@ impl FramePercepts {
         &self.image
     }
 
-    /// Whether a line at `pixel` would have been searched for: inside the image, away from its edges,
-    /// on the carpet (below the field border of its column) and not hidden by anything standing on it.
-    pub fn searched(&self, pixel: &Point2<f64>) -> bool {
+    /// Whether a line at `pixel`, `line_width` pixels wide there, would have been searched for: on the
+    /// carpet (below the field border of its column), not hidden by anything standing on it, and far
+    /// enough inside the image for the scan lines to find it. A crossing needs carpet beyond the line
+    /// on its scan line and two neighbouring scan lines to line up with, so a line within half its
+    /// width and [`EDGE_SCAN_LINES`] scan spacings of the image's edge is often not found.
+    pub fn searched(&self, pixel: &Point2<f64>, line_width: f64) -> bool {
         let (width, height) = self.image.dimensions();
-        let margin = self.image.scan_spacing as f64;
+        let spacing = self.image.scan_spacing as f64;
+        let margin = EDGE_SCAN_LINES * spacing + line_width / 2.0;
         if !(pixel.x >= margin
             && pixel.x < width as f64 - margin
             && pixel.y >= margin
@@ -225,7 +232,7 @@ impl FramePercepts {
         {
             return false;
         }
-        pixel.y > self.image.carpet_top_at(pixel.x) + margin && !self.image.hidden_at(pixel)
+        pixel.y > self.image.carpet_top_at(pixel.x) + spacing && !self.image.hidden_at(pixel)
     }
 }
 
@@ -644,9 +651,11 @@ mod tests {
         let camera = CameraPose::new(0.5, 0.3, 0.0, 0.0).unwrap();
         let percepts = detect(&frame, &CameraIntrinsics::nao_top(), &camera, 0.05).unwrap();
         assert!(percepts.points.is_empty());
-        assert!(percepts.searched(&Point2::new(100.0, 360.0)), "open carpet");
-        assert!(!percepts.searched(&Point2::new(320.0, 360.0)), "behind the robot");
-        assert!(!percepts.searched(&Point2::new(320.0, 2.0)), "at the image edge");
+        assert!(percepts.searched(&Point2::new(100.0, 360.0), 10.0), "open carpet");
+        assert!(!percepts.searched(&Point2::new(320.0, 360.0), 10.0), "behind the robot");
+        assert!(!percepts.searched(&Point2::new(320.0, 2.0), 10.0), "at the image edge");
+        assert!(percepts.searched(&Point2::new(30.0, 360.0), 10.0), "a thin line near the edge");
+        assert!(!percepts.searched(&Point2::new(30.0, 360.0), 30.0), "a wide line near the edge");
     }
 
     #[test]
