@@ -57,10 +57,13 @@ const INLIER_SIGMAS: f64 = 2.5;
 /// line's few crossings).
 const MIN_INLIER_SHARE: f64 = 0.97;
 const MAX_UNSEEN_SHARE: f64 = 0.1;
+/// Lines whose directions' sines differ by less than this are parallel (10°).
+const PARALLEL_SINE: f64 = 0.17;
 /// Weight factor on top of the quality for a contradicted hypothesis.
 const CONTRADICTED_FACTOR: f64 = 0.1;
 /// Largest line-only σ (position, metres; heading, radians) for a fit to count as fully refined: about
-/// the 5 cm / 1° a refined pose claims (at 10 cm / 2° fits 5–10 cm off were called refined).
+/// the 5 cm / 1° a refined pose claims (at 10 cm / 2° fits 5–10 cm off were called refined). A
+/// refined fit also needs [`MIN_POINTS`] of its points off the main line direction.
 const REFINED_SIGMA: (f64, f64) = (0.06, 0.02);
 /// Least prior σ (position, metres; heading, radians) the search starts from.
 const MIN_PRIOR_SIGMA: (f64, f64) = (0.15, 0.09);
@@ -327,7 +330,8 @@ impl LineRefiner {
             .filter(|sigma| sigma.iter().all(|s| s.is_finite()));
         let fixed = line_sigma.is_some_and(|sigma| {
             sigma.x <= REFINED_SIGMA.0 && sigma.y <= REFINED_SIGMA.0 && sigma.z <= REFINED_SIGMA.1
-        });
+        }) && self.off_the_main_direction(observations, &fitted.pose, &fitted.calibration)
+            >= MIN_POINTS;
         let check = if fixed { LineCheck::Refined } else { LineCheck::Partial };
         let sigma = fitted.covariance.diagonal().map(|variance| variance.max(0.0).sqrt());
         let measured = fitted
@@ -359,6 +363,36 @@ impl LineRefiner {
             })
             .count();
         inliers as f64 / observations.len() as f64
+    }
+
+    /// How many of the points lie on a line under `pose` (camera corrected by `calibration`) but not
+    /// on the lines of the direction most of them lie on: on a line across those, or on the circle.
+    /// A pose is fixed along the main direction only by these points; a few of them (a short stub
+    /// where a lone line meets another, a speck) can make a wrong place look fixed.
+    fn off_the_main_direction(
+        &self,
+        observations: &[Observation],
+        pose: &FieldPose,
+        calibration: &Vector2<f64>,
+    ) -> usize {
+        // Points per direction of the segments they lie on (unit vectors, up to sign).
+        let mut directions: Vec<(Vector2<f64>, usize)> = Vec::new();
+        let mut on_lines = 0;
+        for observation in observations {
+            let field = pose.robot_to_field(observation.corrected(calibration));
+            let primitive = self.map.nearest(field);
+            if primitive.residual(field).0 > (INLIER_SIGMAS * observation.sigma).max(0.05) {
+                continue;
+            }
+            on_lines += 1;
+            let Primitive::Segment { start, end } = primitive else { continue };
+            let direction = (end - start).normalize();
+            match directions.iter_mut().find(|(known, _)| known.perp(&direction).abs() < PARALLEL_SINE) {
+                Some((_, count)) => *count += 1,
+                None => directions.push((direction, 1)),
+            }
+        }
+        on_lines - directions.iter().map(|&(_, count)| count).max().unwrap_or(0)
     }
 
     /// Share of the model-line samples some frame should have seen under `pose` (its camera corrected
@@ -525,5 +559,36 @@ mod tests {
         assert_eq!(distinct_places(&fits), 2);
         assert_eq!(distinct_places(&fits[1..2]), 1);
         assert_eq!(distinct_places(&[]), 0);
+    }
+
+    /// Observations at field points, for a robot at the field's origin facing +x (robot frame = field
+    /// frame).
+    fn observed(points: impl IntoIterator<Item = (f64, f64)>) -> Vec<Observation> {
+        points
+            .into_iter()
+            .map(|(x, y)| Observation {
+                ground: Point2::new(x, y),
+                sigma: POINT_SIGMA,
+                calibration_rates: [Vector2::zeros(); 2],
+            })
+            .collect()
+    }
+
+    #[test]
+    fn points_off_the_main_line_direction_are_counted() {
+        let refiner = LineRefiner::new(&FieldModel::default());
+        let origin = FieldPose::new(0.0, 0.0, 0.0).unwrap();
+        let none = Vector2::zeros();
+        // Forty points along the sideline y = 3 (and so along the x axis), and a short stub of five on
+        // the halfway line across it, one point off any line.
+        let sideline = (0..40).map(|i| (-2.0 + 0.1 * i as f64, 3.0));
+        let stub = (0..5).map(|i| (0.0, 2.5 + 0.1 * i as f64));
+        let observations = observed(sideline.clone().chain(stub).chain([(1.3, 1.3)]));
+        assert_eq!(refiner.off_the_main_direction(&observations, &origin, &none), 5);
+        // The other sideline is parallel: still one direction. The centre circle is not.
+        let far_side = (0..20).map(|i| (-1.0 + 0.1 * i as f64, -3.0));
+        let circle = (0..15).map(|i| (0.75 * (0.2 * i as f64).cos(), 0.75 * (0.2 * i as f64).sin()));
+        let observations = observed(sideline.chain(far_side).chain(circle));
+        assert_eq!(refiner.off_the_main_direction(&observations, &origin, &none), 15);
     }
 }

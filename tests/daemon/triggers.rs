@@ -323,7 +323,9 @@ fn the_simulated_camera_relocalises_without_any_files() {
     daemon.control(br#"{"relocalise": {"reason": "demo"}}"#);
     let message = daemon.message();
     assert_eq!(message.frames.used, 2, "{:?}", message.failure);
-    assert_eq!(message.hypotheses.len(), 2);
+    // The half-field network's point-symmetric twins, or the places the lines found and theirs.
+    let hypotheses = message.hypotheses.len();
+    assert!(hypotheses >= 2 && hypotheses % 2 == 0, "{hypotheses} hypotheses");
     assert!(message.captured.is_some());
     daemon.stop();
 }
