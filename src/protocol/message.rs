@@ -122,8 +122,8 @@ pub struct Latency {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum LineCheck {
-    /// The lines fix x, y and heading, each to a line-only σ of at most 6 cm and 1.15°: the pose and
-    /// σ are the line fit's.
+    /// The lines fix x, y and heading, each to a line-only σ of at most 6 cm and 1.15°, with at least
+    /// 12 points off the main line direction: the pose and σ are the line fit's.
     Refined,
     /// The lines fit but fix less (one family of parallel lines, or a wider σ).
     Partial,
