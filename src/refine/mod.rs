@@ -357,12 +357,22 @@ impl LineRefiner {
     ) -> f64 {
         let inliers = observations
             .iter()
-            .filter(|observation| {
-                let distance = self.map.residual(pose.robot_to_field(observation.corrected(calibration))).0;
-                distance <= (INLIER_SIGMAS * observation.sigma).max(0.05)
-            })
+            .filter(|observation| self.line_under(observation, pose, calibration).is_some())
             .count();
         inliers as f64 / observations.len() as f64
+    }
+
+    /// The model line a point lies on under `pose` (camera corrected by `calibration`): the nearest
+    /// one, where the point is within `INLIER_SIGMAS` σ (or 5 cm) of it.
+    fn line_under(
+        &self,
+        observation: &Observation,
+        pose: &FieldPose,
+        calibration: &Vector2<f64>,
+    ) -> Option<&Primitive> {
+        let field = pose.robot_to_field(observation.corrected(calibration));
+        let primitive = self.map.nearest(field);
+        (primitive.residual(field).0 <= (INLIER_SIGMAS * observation.sigma).max(0.05)).then_some(primitive)
     }
 
     /// How many of the points lie on a line under `pose` (camera corrected by `calibration`) but not
@@ -379,11 +389,7 @@ impl LineRefiner {
         let mut directions: Vec<(Vector2<f64>, usize)> = Vec::new();
         let mut on_lines = 0;
         for observation in observations {
-            let field = pose.robot_to_field(observation.corrected(calibration));
-            let primitive = self.map.nearest(field);
-            if primitive.residual(field).0 > (INLIER_SIGMAS * observation.sigma).max(0.05) {
-                continue;
-            }
+            let Some(primitive) = self.line_under(observation, pose, calibration) else { continue };
             on_lines += 1;
             let Primitive::Segment { start, end } = primitive else { continue };
             let direction = (end - start).normalize();
