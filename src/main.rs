@@ -309,6 +309,11 @@ struct ReplayArgs {
     /// calibration error is learnt over the bursts (one robot's recording), as the daemon does.
     #[arg(long)]
     fixed_calibration: bool,
+    /// With --refine: also check the lines at each burst's recorded true pose (verdict, shares, the
+    /// points off the lines and the expected lines unseen, the fit from it): whether the percepts and
+    /// the verification accept the right answer, e.g. in a new hall with ground truth.
+    #[arg(long)]
+    check_truth: bool,
     /// Write plots (error scatter, field map with true and predicted poses) as PNG into this directory.
     #[cfg(feature = "report")]
     #[arg(long, value_name = "DIR")]
@@ -670,6 +675,10 @@ fn replay(args: ReplayArgs) -> anyhow::Result<()> {
         "--camera-jitter {}: expected a standard deviation of 0 to 10 degrees",
         args.camera_jitter
     );
+    anyhow::ensure!(
+        !args.check_truth || args.refine || args.model.is_none(),
+        "--check-truth checks the lines at the true pose: add --refine"
+    );
     let lab_field = args.field.as_deref().map(|path| load_field(Some(path))).transpose()?;
     let (pipeline, field) = if args.model.is_none() {
         info!(recording = %directory.display(), frames = recording.records().len(), "replaying with the lines alone");
@@ -705,6 +714,7 @@ fn replay(args: ReplayArgs) -> anyhow::Result<()> {
             camera_offset: (args.camera_pitch_offset.to_radians(), args.camera_roll_offset.to_radians()),
             camera_jitter: args.camera_jitter.to_radians(),
             learn_calibration: !args.fixed_calibration,
+            check_truth: args.check_truth,
         },
         &mut stdout.lock(),
     )
@@ -729,6 +739,9 @@ fn replay(args: ReplayArgs) -> anyhow::Result<()> {
         }
     } else if let Some(lines) = &summary.lines_alone {
         eprintln!("{} bursts, lines alone: {}", lines.bursts, lines.verdicts());
+        if let Some(at_truth) = &lines.at_truth {
+            eprintln!("{}", at_truth.line());
+        }
         if let Some(path) = &args.metrics_json {
             let json = serde_json::to_string_pretty(lines).expect("metrics serialise");
             std::fs::write(path, json + "\n").with_context(|| format!("writing {}", path.display()))?;

@@ -10,15 +10,15 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
 use crate::eval::{
-    BurstEvaluation, Evaluation, Metrics, RefinedEvaluation, RefinedMetrics, Sample, TwinEvaluation,
-    TwinMetrics,
+    BurstEvaluation, Evaluation, Metrics, RefinedEvaluation, RefinedMetrics, Sample, TruthEvaluation,
+    TruthMetrics, TwinEvaluation, TwinMetrics,
 };
 use crate::geometry::{FieldPose, PoseSigma};
 use crate::pipeline::priors::simulate::{PriorSpec, normal, priors_for};
 use crate::pipeline::{BurstError, Estimate, Pipeline};
 use crate::protocol::message::LineEvidence;
 use crate::recording::{FrameRecord, Recording};
-use crate::refine::CalibrationTracker;
+use crate::refine::{CalibrationTracker, PoseCheck};
 use crate::relocaliser::{Relocalisation, Timings};
 
 /// A pose on the wire: metres and radians.
@@ -63,6 +63,54 @@ pub struct WireFusedHypothesis {
     pub lines: Option<LineEvidence>,
 }
 
+/// Where a point or an expected line sample lies: the frame's file and its pixel (u, v).
+pub type WirePixel = (String, f64, f64);
+
+/// What the lines say about a burst's true pose (`replay --check-truth`).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct TruthReport {
+    /// Line points used.
+    pub points: usize,
+    /// Whether the true pose as recorded meets the verification's shares.
+    pub passes: bool,
+    /// Share of the points on a line at the true pose.
+    pub inlier_share: f64,
+    /// Share of the model-line samples expected at the true pose that no point lies near.
+    pub unseen_share: Option<f64>,
+    /// The points on no line there.
+    pub off_lines: Vec<WirePixel>,
+    /// The expected samples no point lies near.
+    pub unseen: Vec<WirePixel>,
+    /// The fit that starts from the true pose: where it ended and what the lines made of it.
+    pub fit: WireFusedHypothesis,
+}
+
+impl TruthReport {
+    /// The report of `check`, made on the frames of `files` (in the order the burst took them).
+    fn new(files: &[&str], check: &PoseCheck) -> Self {
+        let pixels = |list: &[(usize, nalgebra::Point2<f64>)]| {
+            let round = |value: f64| (value * 10.0).round() / 10.0;
+            list.iter()
+                .map(|(frame, pixel)| (files[*frame].to_owned(), round(pixel.x), round(pixel.y)))
+                .collect()
+        };
+        Self {
+            points: check.points,
+            passes: check.passes(),
+            inlier_share: check.inlier_share,
+            unseen_share: check.unseen_share,
+            off_lines: pixels(&check.off_lines),
+            unseen: pixels(&check.unseen),
+            fit: WireFusedHypothesis {
+                pose: WirePose::from(&check.fit.pose),
+                weight: 1.0,
+                sigma: check.fit.sigma,
+                lines: Some(check.fit.evidence.into()),
+            },
+        }
+    }
+}
+
 /// The line written for a fused burst, after the lines of its frames.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct BurstReport {
@@ -80,13 +128,20 @@ pub struct BurstReport {
     /// The true pose of the burst's first frame, if recorded.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub truth: Option<WirePose>,
+    /// What the lines say about the true pose, with `--check-truth`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub at_truth: Option<TruthReport>,
     /// Why the burst could not be fused, if it could not.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub error: Option<String>,
 }
 
 impl BurstReport {
-    fn new(records: &[FrameRecord], estimate: Result<&Estimate, &BurstError>) -> Self {
+    fn new(
+        records: &[FrameRecord],
+        estimate: Result<&Estimate, &BurstError>,
+        at_truth: Option<TruthReport>,
+    ) -> Self {
         let prior = estimate.ok().and_then(|estimate| estimate.priors.names());
         let (hypotheses, agreeing, error) = match estimate {
             Ok(estimate) => (
@@ -113,6 +168,7 @@ impl BurstReport {
             agreeing,
             prior,
             truth: records[0].pose.as_ref().map(WirePose::from),
+            at_truth,
             error,
         }
     }
@@ -233,6 +289,9 @@ pub struct ReplayOptions {
     /// Whether the camera's calibration error is learnt over the bursts (one robot's recording), as
     /// the daemon does; otherwise every burst starts from the recorded poses.
     pub learn_calibration: bool,
+    /// Whether every burst with a true pose and line points also checks the lines at that pose (see
+    /// [`PoseCheck`]): its line gets an `at_truth` block and the metrics an `at_truth` summary.
+    pub check_truth: bool,
 }
 
 /// Relocalises every frame of `recording` with `pipeline`, writing one JSON line per frame to `out`;
@@ -251,6 +310,7 @@ pub fn replay(
     let mut burst_evaluations = Vec::new();
     let mut refined_evaluations = Vec::new();
     let mut twin_evaluations = Vec::new();
+    let mut truth_evaluations = Vec::new();
     let mut rng = ChaCha8Rng::seed_from_u64(options.prior_seed);
     let with_priors = !options.priors.is_empty();
     let mut failed = 0;
@@ -268,6 +328,8 @@ pub fn replay(
         };
         // Without learning the tracker stays at the default calibration, the one `Pipeline::burst` takes.
         let mut burst = pipeline.calibrated_burst(calibration.calibration());
+        // The frames the burst took, in order (a frame that cannot be loaded is not among them).
+        let mut taken: Vec<&str> = Vec::with_capacity(group.len());
         for record in group {
             let _frame = tracing::warn_span!("frame", file = %record.file).entered();
             let head_yaw = record.camera.map_or(0.0, |camera| camera.head_yaw());
@@ -278,6 +340,7 @@ pub fn replay(
                 let camera = record.camera.map(|camera| camera.corrected(pitch, roll)).transpose();
                 let camera = camera.map_err(|error| format!("the corrected camera pose: {error}"))?;
                 let frame = recording.load_frame(record).map_err(|error| error.to_string())?;
+                taken.push(&record.file);
                 burst.add(&frame, head_yaw, camera.as_ref()).map_err(|error| error.to_string())
             })();
             let report = match result {
@@ -300,6 +363,11 @@ pub fn replay(
         }
         if burst_size > 1 || with_priors || pipeline.checks_lines() {
             let priors = priors_for(&options.priors, group[0].pose.as_ref(), options.min_share, &mut rng);
+            let at_truth = group[0].pose.filter(|_| options.check_truth).and_then(|truth| {
+                let check = burst.check_at(&truth)?;
+                truth_evaluations.push(TruthEvaluation::new(&truth, &check));
+                Some(TruthReport::new(&taken, &check))
+            });
             let (estimate, _) = burst.finish(&priors);
             if let (true, Ok(Estimate { camera: Some(measured), .. })) =
                 (options.learn_calibration, &estimate)
@@ -327,7 +395,7 @@ pub fn replay(
                 }
                 _ => {}
             }
-            write_line(out, &BurstReport::new(group, estimate.as_ref()))?;
+            write_line(out, &BurstReport::new(group, estimate.as_ref(), at_truth))?;
         }
     }
     Ok(ReplaySummary {
@@ -336,6 +404,9 @@ pub fn replay(
         metrics: Metrics::summarise(&evaluations, &burst_evaluations, &refined_evaluations).map(
             |mut metrics| {
                 metrics.twins = TwinMetrics::summarise(&twin_evaluations);
+                if let Some(refined) = &mut metrics.refined {
+                    refined.at_truth = TruthMetrics::summarise(&truth_evaluations);
+                }
                 metrics
             },
         ),
@@ -343,7 +414,8 @@ pub fn replay(
             .relocaliser()
             .is_none()
             .then(|| RefinedMetrics::summarise(&refined_evaluations))
-            .flatten(),
+            .flatten()
+            .map(|lines| RefinedMetrics { at_truth: TruthMetrics::summarise(&truth_evaluations), ..lines }),
         calibration: (calibration.learnt() > 0).then_some(calibration),
         evaluations,
     })

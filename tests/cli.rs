@@ -176,6 +176,52 @@ fn replay_refines_the_sample_against_the_field_lines() {
 }
 
 #[test]
+fn replay_checks_the_lines_at_the_true_pose_and_shows_where_they_disagree() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("metrics.json");
+    let run = |extra: &[&str]| {
+        let mut args = vec!["replay", "--refine", "--check-truth", "--metrics-json", path.to_str().unwrap()];
+        args.extend_from_slice(extra);
+        let output = relocd(&args);
+        assert!(output.status.success(), "{extra:?}: {}", stderr(&output));
+        let bursts: Vec<serde_json::Value> = stdout(&output)
+            .lines()
+            .map(|line| serde_json::from_str::<serde_json::Value>(line).unwrap())
+            .filter(|line| line.get("burst").is_some())
+            .collect();
+        let metrics: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+        (bursts, metrics["refined"]["at_truth"].clone(), stderr(&output))
+    };
+    // As recorded, the sample's true poses pass: 19 of its 21 bursts with enough line points (two
+    // see too little of a line they should).
+    let (bursts, at_truth, log) = run(&[]);
+    assert_eq!(at_truth["bursts"], 21, "{at_truth}");
+    assert!(at_truth["passes_share"].as_f64().unwrap() >= 0.85, "{at_truth}");
+    assert!(at_truth["fit_stayed_share"].as_f64().unwrap() >= 0.85, "{at_truth}");
+    assert!(log.contains("at the true pose (21 bursts)"), "{log}");
+    let checked: Vec<&serde_json::Value> = bursts.iter().filter_map(|burst| burst.get("at_truth")).collect();
+    assert_eq!(checked.len(), 21);
+    // Three degrees of pitch off, trusted as recorded: the points land off the lines, and the report
+    // names each one's frame and pixel.
+    let (bursts, at_truth, _) = run(&["--camera-pitch-offset", "3", "--exact-camera"]);
+    assert!(at_truth["passes_share"].as_f64().unwrap() <= 0.1, "{at_truth}");
+    assert!(at_truth["points_off_lines_share"].as_f64().unwrap() >= 0.9, "{at_truth}");
+    let burst = bursts.iter().find(|burst| burst.get("at_truth").is_some()).unwrap();
+    let off_lines = burst["at_truth"]["off_lines"].as_array().unwrap();
+    assert!(!off_lines.is_empty(), "{burst}");
+    for point in off_lines {
+        assert_eq!(point[0], burst["burst"][0], "{point}");
+        let (u, v) = (point[1].as_f64().unwrap(), point[2].as_f64().unwrap());
+        assert!((0.0..640.0).contains(&u) && (0.0..480.0).contains(&v), "{point}");
+    }
+    // Without line checks there is nothing to check at the truth: said so, not silently ignored.
+    let output = relocd(&["replay", "--check-truth"]);
+    assert!(!output.status.success());
+    assert!(stderr(&output).contains("add --refine"), "{}", stderr(&output));
+}
+
+#[test]
 fn the_line_fit_corrects_a_camera_pitch_error_and_a_lab_field_is_taken() {
     let dir = tempfile::tempdir().unwrap();
     let metrics = |extra: &[&str]| {

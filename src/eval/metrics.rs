@@ -2,6 +2,7 @@
 
 use serde::Serialize;
 
+use super::TruthMetrics;
 use crate::geometry::angle::angle_distance;
 use crate::geometry::{FieldPose, FoldClass, Representation, Symmetry};
 use crate::pipeline::Hypothesis;
@@ -92,7 +93,7 @@ impl Sample {
 }
 
 /// Location (metres) and heading (degrees) error of `pose` against `truth`.
-fn pose_error(pose: &FieldPose, truth: &FieldPose) -> (f64, f64) {
+pub(super) fn pose_error(pose: &FieldPose, truth: &FieldPose) -> (f64, f64) {
     (pose.distance_to(truth), angle_distance(pose.heading(), truth.heading()).to_degrees())
 }
 
@@ -194,6 +195,9 @@ pub struct RefinedMetrics {
     /// Closest hypothesis vs truth where the lines fixed the pose.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub where_refined: Option<ErrorStats>,
+    /// The lines at the true pose (`replay --check-truth`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub at_truth: Option<TruthMetrics>,
 }
 
 impl RefinedMetrics {
@@ -235,6 +239,7 @@ impl RefinedMetrics {
             modelled: ErrorStats::of(&errors.iter().map(|e| e.modelled).collect::<Vec<_>>(), &[]),
             best_of_set: ErrorStats::of(&errors.iter().map(|e| e.best_of_set).collect::<Vec<_>>(), &[]),
             where_refined: (!refined.is_empty()).then(|| ErrorStats::of(&refined, &[])),
+            at_truth: None,
         })
     }
 }
@@ -446,6 +451,9 @@ impl Metrics {
                 text += &row("  refined", where_refined);
             }
             counts += &format!(", lines: {}", refined.verdicts());
+            if let Some(at_truth) = &refined.at_truth {
+                counts += &format!("\n{}", at_truth.line());
+            }
         }
         if let Some(twins) = &self.twins {
             counts += &format!("\n{}", twins.line());

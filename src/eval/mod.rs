@@ -3,6 +3,7 @@
 //! fold-bit error, errors by distance to the fold boundary, and accuracy against coverage.
 
 mod metrics;
+mod truth;
 mod twins;
 
 pub(crate) use metrics::median;
@@ -10,4 +11,5 @@ pub use metrics::{
     BurstEvaluation, BurstMetrics, Coverage, ErrorStats, Evaluation, Metrics, RefinedEvaluation,
     RefinedMetrics, Sample,
 };
+pub use truth::{TruthEvaluation, TruthMetrics};
 pub use twins::{TwinEvaluation, TwinMetrics};

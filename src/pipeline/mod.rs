@@ -20,7 +20,7 @@ use crate::geometry::angle::angle_distance;
 use crate::geometry::{CameraIntrinsics, CameraPose, FieldModel, FieldPose, PoseSigma, Symmetry};
 use crate::refine::{
     CameraCalibration, CameraMeasurement, FramePercepts, Guess, LineCheck, LineEvidence, LineFit,
-    LineRefiner, LineVerdict, distinct_places, same_place_or_twin,
+    LineRefiner, LineVerdict, PoseCheck, distinct_places, same_place_or_twin,
 };
 use crate::relocaliser::contract::CameraRange;
 use crate::relocaliser::{
@@ -192,6 +192,7 @@ impl Pipeline {
             frames: 0,
             predictions: Vec::new(),
             percepts: Vec::new(),
+            percept_frames: Vec::new(),
             failures: Vec::new(),
             times: StageTimes::default(),
             camera_warned: false,
@@ -207,6 +208,8 @@ pub struct Burst<'p> {
     frames: usize,
     predictions: Vec<Prediction>,
     percepts: Vec<FramePercepts>,
+    /// Which frame of the burst (in the order added) each of `percepts` came from.
+    percept_frames: Vec<usize>,
     failures: Vec<String>,
     times: StageTimes,
     /// Whether this burst has warned of a camera outside the network's training range.
@@ -245,7 +248,10 @@ impl Burst<'_> {
                         .map_err(|error| error.to_string())
                 });
             match found {
-                Ok(found) => self.percepts.push(found.with_camera_sigma(self.calibration.sigma)),
+                Ok(found) => {
+                    self.percepts.push(found.with_camera_sigma(self.calibration.sigma));
+                    self.percept_frames.push(self.frames - 1);
+                }
                 Err(error) => tracing::warn!("frame not used for line refinement: {error}"),
             }
             self.times.lines_ms += started.elapsed().as_secs_f64() * 1e3;
@@ -264,6 +270,17 @@ impl Burst<'_> {
                 Err(error)
             }
         }
+    }
+
+    /// What the line points of the frames so far say about `pose`, such as the robot's true pose (see
+    /// [`PoseCheck`]; its frame indices count the frames in the order added); `None` without line
+    /// checks or with too few line points.
+    pub fn check_at(&self, pose: &FieldPose) -> Option<PoseCheck> {
+        let mut check = self.pipeline.refiner.as_ref()?.check_at(&self.percepts, pose)?;
+        for (frame, _) in check.off_lines.iter_mut().chain(check.unseen.iter_mut()) {
+            *frame = self.percept_frames[*frame];
+        }
+        Some(check)
     }
 
     /// Why frames failed in the network so far, in order.

@@ -155,6 +155,44 @@ pub enum LineVerdict {
     Checked(Vec<LineFit>),
 }
 
+/// What the lines say about one given pose, such as a recording's true pose: how the frames' line
+/// points and the lines the camera should have seen agree with it as it is, where they do not, and the
+/// fit that starts from it. A team with ground truth sees whether the percepts and the verification
+/// accept the right answer in their hall.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PoseCheck {
+    /// Line points used (all frames of the burst).
+    pub points: usize,
+    /// Share of the points on a line at the pose as given (the camera uncorrected).
+    pub inlier_share: f64,
+    /// Share of the model-line samples expected at the pose as given that no point lies near; `None`
+    /// when too few were expected to tell.
+    pub unseen_share: Option<f64>,
+    /// The points on no line at the pose: (frame in the burst, pixel).
+    pub off_lines: Vec<(usize, Point2<f64>)>,
+    /// The expected model-line samples no point lies near: (frame in the burst, pixel).
+    pub unseen: Vec<(usize, Point2<f64>)>,
+    /// The fit from the pose as a guess: what a hypothesis exactly right gets.
+    pub fit: LineFit,
+}
+
+impl PoseCheck {
+    /// Whether the pose as given meets the verification's shares (the fit from it may still move).
+    pub fn passes(&self) -> bool {
+        self.inlier_share_passes() && self.unseen_share_passes()
+    }
+
+    /// Whether enough of the points lie on a line at the pose as given.
+    pub fn inlier_share_passes(&self) -> bool {
+        self.inlier_share >= MIN_INLIER_SHARE
+    }
+
+    /// Whether few enough of the lines expected at the pose as given went unseen.
+    pub fn unseen_share_passes(&self) -> bool {
+        self.unseen_share.is_none_or(|unseen| unseen <= MAX_UNSEEN_SHARE)
+    }
+}
+
 /// Refines hypotheses against one field's lines.
 #[derive(Clone, Debug)]
 pub struct LineRefiner {
@@ -263,6 +301,39 @@ impl LineRefiner {
             turn: bounded(2.0 * guess.sigma.theta, turn, NEAR_REACH.1),
         };
         self.search_within(frames, Some(&region))
+    }
+
+    /// What the burst's lines say about `pose` (see [`PoseCheck`]); `None` with too few line points.
+    pub fn check_at(&self, frames: &[FramePercepts], pose: &FieldPose) -> Option<PoseCheck> {
+        let located: Vec<(usize, Point2<f64>, Observation)> = located_observations(frames).collect();
+        if located.len() < MIN_POINTS {
+            return None;
+        }
+        let uncorrected = Vector2::zeros();
+        let off_lines: Vec<(usize, Point2<f64>)> = located
+            .iter()
+            .filter(|(_, _, observation)| self.line_under(observation, pose, &uncorrected).is_none())
+            .map(|&(frame, pixel, _)| (frame, pixel))
+            .collect();
+        let (mut expected, mut unseen) = (0usize, Vec::new());
+        self.for_each_expected(frames, pose, &uncorrected, |frame, pixel, seen| {
+            expected += 1;
+            if !seen {
+                unseen.push((frame, pixel));
+            }
+        });
+        let observations: Vec<Observation> =
+            located.into_iter().map(|(_, _, observation)| observation).collect();
+        let sigma = PoseSigma { x: MIN_PRIOR_SIGMA.0, y: MIN_PRIOR_SIGMA.0, theta: MIN_PRIOR_SIGMA.1 };
+        let fit = self.check_one(frames, &observations, &Guess { pose: *pose, sigma });
+        Some(PoseCheck {
+            points: observations.len(),
+            inlier_share: 1.0 - off_lines.len() as f64 / observations.len() as f64,
+            unseen_share: (expected >= MIN_EXPECTED).then(|| unseen.len() as f64 / expected as f64),
+            off_lines,
+            unseen,
+            fit,
+        })
     }
 
     /// The places the lines fit among the coarse grid's best candidates (all over the field, or in
@@ -411,7 +482,24 @@ impl LineRefiner {
         calibration: &Vector2<f64>,
     ) -> Option<f64> {
         let (mut expected, mut unseen) = (0usize, 0usize);
-        for frame in frames {
+        self.for_each_expected(frames, pose, calibration, |_, _, seen| {
+            expected += 1;
+            unseen += usize::from(!seen);
+        });
+        (expected >= MIN_EXPECTED).then(|| unseen as f64 / expected as f64)
+    }
+
+    /// Calls `visit(frame, pixel, seen)` for every model-line sample some frame of the burst should
+    /// have seen under `pose` (its camera corrected by `calibration`): where it lies in that frame's
+    /// image, and whether a line point of that frame lies near it (within a scan spacing and a bit).
+    fn for_each_expected(
+        &self,
+        frames: &[FramePercepts],
+        pose: &FieldPose,
+        calibration: &Vector2<f64>,
+        mut visit: impl FnMut(usize, Point2<f64>, bool),
+    ) {
+        for (index, frame) in frames.iter().enumerate() {
             let Some(camera) = frame.corrected_camera(calibration.x, calibration.y) else {
                 continue;
             };
@@ -428,12 +516,10 @@ impl LineRefiner {
                 if !frame.searched(&pixel, self.width_in_pixels(&camera, &ground, &pixel)) {
                     continue;
                 }
-                expected += 1;
                 let seen = frame.points.iter().any(|point| (point.pixel - pixel).norm() <= tolerance);
-                unseen += usize::from(!seen);
+                visit(index, pixel, seen);
             }
         }
-        (expected >= MIN_EXPECTED).then(|| unseen as f64 / expected as f64)
     }
 
     /// How wide, in pixels, a painted line at `ground` (robot frame) looks at `pixel` under `camera`:
@@ -491,7 +577,6 @@ pub fn same_place_or_twin(a: &FieldPose, b: &FieldPose) -> bool {
     same(a, b) || same(&Symmetry::PointReflection.apply(a), b)
 }
 
-/// The line points of all frames as observations with their σ.
 /// The prior of a burst's camera correction: none on top of the frames' poses, within the loosest of
 /// their spreads.
 fn camera_calibration(frames: &[FramePercepts]) -> CameraCalibration {
@@ -502,21 +587,30 @@ fn camera_calibration(frames: &[FramePercepts]) -> CameraCalibration {
     }
 }
 
+/// The line points of all frames as observations with their σ.
 fn observations(frames: &[FramePercepts]) -> Vec<Observation> {
-    frames
-        .iter()
-        .flat_map(|frame| {
-            let height = frame.camera_height();
-            frame.points.iter().filter_map(move |point| {
-                let distance = point.ground.coords.norm();
-                (distance <= MAX_POINT_DISTANCE).then(|| Observation {
-                    ground: point.ground,
-                    sigma: POINT_SIGMA + distance * distance / height * PITCH_SIGMA,
-                    calibration_rates: point.calibration_rates,
-                })
+    located_observations(frames).map(|(_, _, observation)| observation).collect()
+}
+
+/// The line points of all frames within reach, each with its frame's index in the burst, its pixel and
+/// its observation.
+fn located_observations(
+    frames: &[FramePercepts],
+) -> impl Iterator<Item = (usize, Point2<f64>, Observation)> + '_ {
+    frames.iter().enumerate().flat_map(|(index, frame)| {
+        let height = frame.camera_height();
+        frame.points.iter().filter_map(move |point| {
+            let distance = point.ground.coords.norm();
+            (distance <= MAX_POINT_DISTANCE).then(|| {
+                let sigma = POINT_SIGMA + distance * distance / height * PITCH_SIGMA;
+                (
+                    index,
+                    point.pixel,
+                    Observation { ground: point.ground, sigma, calibration_rates: point.calibration_rates },
+                )
             })
         })
-        .collect()
+    })
 }
 
 #[cfg(test)]
