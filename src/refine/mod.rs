@@ -43,6 +43,8 @@ const MAX_POINT_DISTANCE: f64 = 5.0;
 const EXPECTED_RANGE: (f64, f64) = (0.3, 3.0);
 /// Spacing of the model-line samples checked for being seen, metres.
 const EXPECTED_SPACING: f64 = 0.1;
+/// Model-line samples closer than this, metres, are one (the shared end of two lines that meet).
+const SAME_SAMPLE: f64 = 0.01;
 /// Shortest painted segment whose absence counts against a pose, metres: a penalty mark's arms are
 /// shorter and the percepts drop a mark as they drop a ball's patch (a blob that does not continue).
 const MIN_EXPECTED_SEGMENT: f64 = 0.3;
@@ -212,12 +214,18 @@ impl LineRefiner {
     /// when the first search needs it.
     pub fn new(field: &FieldModel) -> Self {
         let map = LineMap::new(field);
-        let line_samples = map
+        // Where lines meet (a corner, a T) their ends are one place on the field: sampled once.
+        let mut line_samples: Vec<Point2<f64>> = Vec::new();
+        for sample in map
             .primitives()
             .iter()
             .filter(|primitive| expected_to_be_seen(primitive))
             .flat_map(|primitive| primitive.samples(EXPECTED_SPACING))
-            .collect();
+        {
+            if !line_samples.iter().any(|known| (known - sample).norm() < SAME_SAMPLE) {
+                line_samples.push(sample);
+            }
+        }
         Self {
             field: field.clone(),
             map,
@@ -690,5 +698,23 @@ mod tests {
         let circle = (0..15).map(|i| (0.75 * (0.2 * i as f64).cos(), 0.75 * (0.2 * i as f64).sin()));
         let observations = observed(sideline.chain(far_side).chain(circle));
         assert_eq!(refiner.off_the_main_direction(&observations, &origin, &none), 15);
+    }
+
+    #[test]
+    fn where_lines_meet_the_field_is_sampled_once() {
+        let refiner = LineRefiner::new(&FieldModel::default());
+        let samples = &refiner.line_samples;
+        for (index, sample) in samples.iter().enumerate() {
+            assert!(
+                samples[index + 1..].iter().all(|other| (other - sample).norm() >= SAME_SAMPLE),
+                "{sample:?} sampled twice"
+            );
+        }
+        // A corner of the field and the T where the halfway line meets a sideline are among them.
+        let dimensions = FieldModel::default().dimensions().clone();
+        let (half_length, half_width) = (dimensions.field_length / 2.0, dimensions.field_width / 2.0);
+        for point in [Point2::new(half_length, half_width), Point2::new(0.0, -half_width)] {
+            assert!(samples.iter().any(|sample| (sample - point).norm() < 1e-9), "{point:?}");
+        }
     }
 }
