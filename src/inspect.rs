@@ -17,7 +17,7 @@ use crate::frame::Frame;
 use crate::geometry::{Camera, CameraIntrinsics, CameraPose, FieldModel, FieldPose};
 use crate::recording::{INDEX_FILE, Recording, RecordingError};
 use crate::refine::line_map::field_primitives;
-use crate::refine::{ImagePercepts, PerceptError, detect, detect_in_image};
+use crate::refine::{ImagePercepts, LineRefiner, PerceptError, PoseCheck, detect, detect_in_image};
 
 /// Spacing of the field-line samples drawn under the true pose, metres.
 const FIELD_SAMPLE_SPACING: f64 = 0.02;
@@ -103,6 +103,39 @@ pub struct Inspection {
     /// without a camera.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub ground_points: Option<Vec<[f64; 2]>>,
+    /// For a recorded frame with a true pose and enough line points: the lines at that pose.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub at_truth: Option<TruthInspection>,
+}
+
+/// The lines at a frame's true pose (see [`PoseCheck`]).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct TruthInspection {
+    /// Whether the true pose as recorded meets the verification's shares.
+    pub passes: bool,
+    /// Share of the line points on a line there.
+    pub inlier_share: f64,
+    /// Share of the lines expected there that were not seen; `null` when too few were expected.
+    pub unseen_share: Option<f64>,
+    /// The line points on no line there, `[u, v]`.
+    pub off_lines: Vec<[f64; 2]>,
+    /// Where the expected lines no point was found near lie in the image, `[u, v]`.
+    pub unseen: Vec<[f64; 2]>,
+}
+
+impl TruthInspection {
+    fn new(check: &PoseCheck) -> Self {
+        let pixels = |list: &[(usize, Point2<f64>)]| {
+            list.iter().map(|(_, pixel)| [rounded(pixel.x, 2), rounded(pixel.y, 2)]).collect()
+        };
+        Self {
+            passes: check.passes(),
+            inlier_share: rounded(check.inlier_share, 4),
+            unseen_share: check.unseen_share.map(|share| rounded(share, 4)),
+            off_lines: pixels(&check.off_lines),
+            unseen: pixels(&check.unseen),
+        }
+    }
 }
 
 /// Inspects every path (image files or recording directories, in order), handing each frame's
@@ -116,6 +149,9 @@ pub fn inspect(
         fs::create_dir_all(out)
             .map_err(|error| InspectError::Overlay { path: out.clone(), reason: error.to_string() })?;
     }
+    // The field's lines, checked under true poses (its distance map is built once, when first needed).
+    let refiner = std::cell::OnceCell::new();
+    let refiner = || refiner.get_or_init(|| LineRefiner::new(&options.field));
     // The field's painted lines as points, drawn under true poses.
     let field_lines: Vec<Point2<f64>> = field_primitives(&options.field)
         .iter()
@@ -132,6 +168,7 @@ pub fn inspect(
                 };
                 let truth = record.pose.zip(camera);
                 let file = path.join(&record.file);
+                let truth = truth.map(|(pose, camera)| (pose, camera, refiner()));
                 emit(inspect_frame(&file, &frame, camera, truth, &field_lines, options)?);
             }
         } else {
@@ -144,37 +181,41 @@ pub fn inspect(
     Ok(())
 }
 
-/// One frame: its percepts, and its overlay where asked for.
+/// One frame: its percepts (checked at the true pose, with its camera pose and the refiner, where it
+/// has one), and its overlay where asked for.
 fn inspect_frame(
     file: &Path,
     frame: &Frame,
     camera: Option<CameraPose>,
-    truth: Option<(FieldPose, CameraPose)>,
+    truth: Option<(FieldPose, CameraPose, &LineRefiner)>,
     field_lines: &[Point2<f64>],
     options: &InspectOptions,
 ) -> Result<Inspection, InspectError> {
     let failed = |source| InspectError::Percepts { path: file.to_path_buf(), source };
     let (width, height) = frame.dimensions();
     let line_width = options.field.dimensions().line_width;
-    let (image, points, ground) = match camera {
+    let (image, points, ground, at_truth) = match camera {
         Some(pose) => {
             let percepts = detect(frame, &options.intrinsics, &pose, line_width).map_err(failed)?;
             let pixels: Vec<Point2<f64>> = percepts.points.iter().map(|point| point.pixel).collect();
             let ground: Vec<[f64; 2]> =
                 percepts.points.iter().map(|point| [point.ground.x, point.ground.y]).collect();
-            (percepts.image().clone(), pixels, Some(ground))
+            let at_truth =
+                truth.and_then(|(pose, _, refiner)| refiner.check_at(std::slice::from_ref(&percepts), &pose));
+            (percepts.image().clone(), pixels, Some(ground), at_truth)
         }
         None => {
             let image = detect_in_image(frame).map_err(failed)?;
             let pixels = image.crossings.iter().map(|crossing| crossing.centre()).collect();
-            (image, pixels, None)
+            (image, pixels, None, None)
         }
     };
     if let Some(out) = &options.out {
         let name =
             file.file_name().map_or_else(|| "frame".into(), |name| name.to_string_lossy().into_owned());
         let path = out.join(format!("{name}.inspect.png"));
-        let overlay = draw_overlay(frame, &image, &points, truth, field_lines, options);
+        let truth = truth.map(|(pose, camera, _)| (pose, camera));
+        let overlay = draw_overlay(frame, &image, &points, truth, at_truth.as_ref(), field_lines, options);
         overlay.save(&path).map_err(|error| InspectError::Overlay { path, reason: error.to_string() })?;
     }
     let round = |value: f64| rounded(value, 2);
@@ -193,6 +234,7 @@ fn inspect_frame(
         line_points: points.iter().map(|point| [round(point.x), round(point.y)]).collect(),
         ground_points: ground
             .map(|ground| ground.iter().map(|[x, y]| [rounded(*x, 3), rounded(*y, 3)]).collect()),
+        at_truth: at_truth.as_ref().map(TruthInspection::new),
     })
 }
 
@@ -203,12 +245,15 @@ fn rounded(value: f64, decimals: i32) -> f64 {
 }
 
 /// The frame with its percepts drawn on it: the carpet's top edge (yellow), crossings the ground
-/// gate dropped (red), line points (magenta crosses), and `field_lines` under the true pose (cyan).
+/// gate dropped (red), line points (magenta crosses), `field_lines` under the true pose (cyan) and,
+/// from the check there, the lines expected but unseen (orange squares) and the points on no line
+/// (blue squares).
 fn draw_overlay(
     frame: &Frame,
     image: &ImagePercepts,
     points: &[Point2<f64>],
     truth: Option<(FieldPose, CameraPose)>,
+    at_truth: Option<&PoseCheck>,
     field_lines: &[Point2<f64>],
     options: &InspectOptions,
 ) -> RgbImage {
@@ -248,6 +293,19 @@ fn draw_overlay(
             let d = f64::from(d);
             put(&mut canvas, point.x + d, point.y, [255, 0, 255]);
             put(&mut canvas, point.x, point.y + d, [255, 0, 255]);
+        }
+    }
+    if let Some(check) = at_truth {
+        let marked = [(&check.unseen, [255, 140, 0]), (&check.off_lines, [40, 90, 255])];
+        for (pixels, colour) in marked {
+            for (_, pixel) in pixels.iter() {
+                for d in -4..=4 {
+                    let d = f64::from(d);
+                    for (dx, dy) in [(d, -4.0), (d, 4.0), (-4.0, d), (4.0, d)] {
+                        put(&mut canvas, pixel.x + dx, pixel.y + dy, colour);
+                    }
+                }
+            }
         }
     }
     canvas

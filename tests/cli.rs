@@ -520,8 +520,22 @@ fn inspect_prints_the_percepts_of_a_recording_and_draws_them() {
         let points = line["line_points"].as_array().unwrap();
         assert_eq!(points.len(), line["ground_points"].as_array().unwrap().len());
         assert_eq!(line["carpet_edge"].as_array().unwrap().len(), 80);
+        // Rendered with the recorded camera: every point lies on a line at the true pose.
+        assert!(points.len() >= 12, "{line}");
+        assert_eq!(line["at_truth"]["passes"], true, "{line}");
+        assert!(line["at_truth"]["off_lines"].as_array().unwrap().is_empty(), "{line}");
     }
     assert_eq!(std::fs::read_dir(&overlays).unwrap().count(), 2);
+    // A camera pitched 2–7° off what took the frames: at the truth the points land off the lines, and
+    // the check lists them (and the overlays mark them).
+    let output =
+        relocd(&["inspect", out.to_str().unwrap(), "--camera-pitch", "22", "--camera-height", "0.5"]);
+    assert!(output.status.success(), "{}", stderr(&output));
+    for line in stdout(&output).lines().map(|line| serde_json::from_str::<serde_json::Value>(line).unwrap()) {
+        assert_eq!(line["at_truth"]["passes"], false, "{line}");
+        assert!(line["at_truth"]["inlier_share"].as_f64().unwrap() < 0.9, "{line}");
+        assert!(!line["at_truth"]["off_lines"].as_array().unwrap().is_empty(), "{line}");
+    }
 }
 
 #[test]
