@@ -81,7 +81,8 @@ pub struct TruthReport {
     pub off_lines: Vec<WirePixel>,
     /// The expected samples no point lies near.
     pub unseen: Vec<WirePixel>,
-    /// The fit that starts from the true pose: where it ended and what the lines made of it.
+    /// The fit that starts from the true pose (weight 1, alone): where it ended and what the lines
+    /// made of it.
     pub fit: WireFusedHypothesis,
 }
 

@@ -187,6 +187,45 @@ fn lines_down_weight_a_contradicted_hypothesis_and_tie_point_twins() {
 }
 
 #[test]
+fn the_true_pose_passes_its_check_and_a_wrong_one_shows_where_it_disagrees() {
+    let refiner = LineRefiner::new(&FieldModel::default()).with_camera_correction(false);
+    let (sampled, percepts) = (0..40)
+        .map(rendered)
+        .map(|(sampled, frame)| {
+            let percepts = percepts(&refiner, &sampled, &frame);
+            (sampled, percepts)
+        })
+        .find(|(sampled, percepts)| {
+            percepts.points.len() > 100 && sees_two_directions(&refiner, percepts, &sampled.pose)
+        })
+        .expect("a frame with lines");
+    let frames = std::slice::from_ref(&percepts);
+    let at_truth = refiner.check_at(frames, &sampled.pose).expect("enough points");
+    assert!(at_truth.passes(), "{at_truth:?}");
+    assert!(at_truth.off_lines.is_empty() && at_truth.inlier_share == 1.0, "{at_truth:?}");
+    assert_eq!(at_truth.points, at_truth.fit.evidence.points);
+    assert_eq!(at_truth.fit.evidence.check, LineCheck::Refined);
+    assert!(at_truth.fit.pose.distance_to(&sampled.pose) < 0.05, "{:?}", at_truth.fit.pose);
+    // Half a metre sideways and 20° turned, the points miss the lines and the lines the camera should
+    // see there are missing; each is named by its frame and pixel, inside the image.
+    let truth = sampled.pose;
+    let wrong = FieldPose::new(truth.x() + 0.5, truth.y(), truth.heading() + 20f64.to_radians()).unwrap();
+    let check = refiner.check_at(frames, &wrong).expect("enough points");
+    assert!(!check.passes(), "{check:?}");
+    assert!(!check.inlier_share_passes() && check.inlier_share < 0.5, "{}", check.inlier_share);
+    assert_eq!(check.off_lines.len(), ((1.0 - check.inlier_share) * check.points as f64).round() as usize);
+    let (width, height) = percepts.image().dimensions();
+    for &(frame, pixel) in check.off_lines.iter().chain(&check.unseen) {
+        assert_eq!(frame, 0);
+        assert!((0.0..width as f64).contains(&pixel.x) && (0.0..height as f64).contains(&pixel.y), "{pixel}");
+    }
+    // Too few points: nothing to check.
+    let mut few = percepts.clone();
+    few.points.truncate(5);
+    assert!(refiner.check_at(std::slice::from_ref(&few), &truth).is_none());
+}
+
+#[test]
 fn a_prior_guess_near_the_truth_finds_the_place_a_lost_network_missed() {
     let refiner = LineRefiner::new(&FieldModel::default()).with_camera_correction(false);
     let (sampled, percepts) = (0..40)
