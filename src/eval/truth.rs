@@ -85,8 +85,9 @@ impl TruthMetrics {
     /// The shares in one line for people.
     pub fn line(&self) -> String {
         format!(
-            "at the true pose ({} bursts): {:.1}% pass ({:.1}% with points off the lines, {:.1}% with lines \
-             unseen); the fit from it {:.1}% refined, {:.1}% partial, {:.1}% contradicted, {:.1}% standing within 5 cm / 1°",
+            "at the true pose ({} bursts): {:.1}% pass ({:.1}% with points off the lines, {:.1}% with \
+             lines unseen); the fit from it {:.1}% refined, {:.1}% partial, {:.1}% contradicted, {:.1}% \
+             standing within 5 cm / 1°",
             self.bursts,
             100.0 * self.passes_share,
             100.0 * self.points_off_lines_share,
