@@ -212,7 +212,7 @@ fn the_true_pose_passes_its_check_and_a_wrong_one_shows_where_it_disagrees() {
     let wrong = FieldPose::new(truth.x() + 0.5, truth.y(), truth.heading() + 20f64.to_radians()).unwrap();
     let check = refiner.check_at(frames, &wrong).expect("enough points");
     assert!(!check.passes(), "{check:?}");
-    assert!(!check.inlier_share_passes() && check.inlier_share < 0.5, "{}", check.inlier_share);
+    assert!(!check.inlier_share_passes() && check.inlier_share < 0.8, "{}", check.inlier_share);
     assert_eq!(check.off_lines.len(), ((1.0 - check.inlier_share) * check.points as f64).round() as usize);
     let (width, height) = percepts.image().dimensions();
     for &(frame, pixel) in check.off_lines.iter().chain(&check.unseen) {
