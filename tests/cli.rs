@@ -17,6 +17,15 @@ fn stderr(output: &Output) -> String {
     String::from_utf8_lossy(&output.stderr).into_owned()
 }
 
+/// The lines of a replay's output that report a burst (not a frame).
+fn burst_lines(output: &Output) -> Vec<serde_json::Value> {
+    stdout(output)
+        .lines()
+        .map(|line| serde_json::from_str::<serde_json::Value>(line).unwrap())
+        .filter(|line| line.get("burst").is_some())
+        .collect()
+}
+
 fn render_small(out: &Path, extra: &[&str]) -> Output {
     let out = out.to_str().unwrap();
     let mut args =
@@ -184,11 +193,7 @@ fn replay_checks_the_lines_at_the_true_pose_and_shows_where_they_disagree() {
         args.extend_from_slice(extra);
         let output = relocd(&args);
         assert!(output.status.success(), "{extra:?}: {}", stderr(&output));
-        let bursts: Vec<serde_json::Value> = stdout(&output)
-            .lines()
-            .map(|line| serde_json::from_str::<serde_json::Value>(line).unwrap())
-            .filter(|line| line.get("burst").is_some())
-            .collect();
+        let bursts = burst_lines(&output);
         let metrics: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
         (bursts, metrics["refined"]["at_truth"].clone(), stderr(&output))
@@ -274,11 +279,7 @@ fn replay_refine_without_camera_poses_keeps_the_network_result_and_says_why() {
     let output = relocd(&["replay", dir.path().to_str().unwrap(), "--refine"]);
     assert!(output.status.success(), "{}", stderr(&output));
     assert!(stderr(&output).contains("no camera pose recorded"), "{}", stderr(&output));
-    let bursts: Vec<serde_json::Value> = stdout(&output)
-        .lines()
-        .map(|line| serde_json::from_str::<serde_json::Value>(line).unwrap())
-        .filter(|line| line.get("burst").is_some())
-        .collect();
+    let bursts = burst_lines(&output);
     assert_eq!(bursts.len(), 2);
     for burst in &bursts {
         for hypothesis in burst["hypotheses"].as_array().unwrap() {
@@ -345,11 +346,7 @@ fn the_penalty_prior_picks_the_own_half_for_robots_put_back_after_a_penalty() {
     assert!(rendered.status.success(), "{}", stderr(&rendered));
     let output = relocd(&["replay", recording.to_str().unwrap(), "--prior", "penalty-return"]);
     assert!(output.status.success(), "{}", stderr(&output));
-    let bursts: Vec<serde_json::Value> = stdout(&output)
-        .lines()
-        .map(|line| serde_json::from_str::<serde_json::Value>(line).unwrap())
-        .filter(|line| line.get("burst").is_some())
-        .collect();
+    let bursts = burst_lines(&output);
     assert_eq!(bursts.len(), 4, "a burst of one per frame");
     for burst in &bursts {
         let truth = &burst["truth"];

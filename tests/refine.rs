@@ -76,6 +76,20 @@ fn sees_two_directions(refiner: &LineRefiner, percepts: &FramePercepts, truth: &
 }
 
 /// Distances of the line points of frames 0..12 from the true lines, sorted.
+/// The first rendered frame with plenty of line points on two line directions, and its percepts.
+fn frame_with_lines(refiner: &LineRefiner) -> (SampledFrame, FramePercepts) {
+    (0..40)
+        .map(rendered)
+        .map(|(sampled, frame)| {
+            let percepts = percepts(refiner, &sampled, &frame);
+            (sampled, percepts)
+        })
+        .find(|(sampled, percepts)| {
+            percepts.points.len() > 100 && sees_two_directions(refiner, percepts, &sampled.pose)
+        })
+        .expect("a frame with lines")
+}
+
 fn distances_from_the_true_lines(render: fn(u64) -> (SampledFrame, Frame)) -> Vec<f64> {
     let field = FieldModel::default();
     let refiner = LineRefiner::new(&field);
@@ -154,18 +168,7 @@ fn refinement_recovers_perturbed_poses() {
 #[test]
 fn lines_down_weight_a_contradicted_hypothesis_and_tie_point_twins() {
     let refiner = LineRefiner::new(&FieldModel::default()).with_camera_correction(false);
-    // Find a frame with plenty of lines.
-    let (sampled, frame, percepts) = (0..40)
-        .map(rendered)
-        .map(|(sampled, frame)| {
-            let percepts = percepts(&refiner, &sampled, &frame);
-            (sampled, frame, percepts)
-        })
-        .find(|(sampled, _, percepts)| {
-            percepts.points.len() > 100 && sees_two_directions(&refiner, percepts, &sampled.pose)
-        })
-        .expect("a frame with lines");
-    drop(frame);
+    let (sampled, percepts) = frame_with_lines(&refiner);
     let truth = sampled.pose;
     let twin = Symmetry::PointReflection.apply(&truth);
     // A wrong hypothesis: the mirror image, which sees the lines mirrored.
@@ -189,16 +192,7 @@ fn lines_down_weight_a_contradicted_hypothesis_and_tie_point_twins() {
 #[test]
 fn the_true_pose_passes_its_check_and_a_wrong_one_shows_where_it_disagrees() {
     let refiner = LineRefiner::new(&FieldModel::default()).with_camera_correction(false);
-    let (sampled, percepts) = (0..40)
-        .map(rendered)
-        .map(|(sampled, frame)| {
-            let percepts = percepts(&refiner, &sampled, &frame);
-            (sampled, percepts)
-        })
-        .find(|(sampled, percepts)| {
-            percepts.points.len() > 100 && sees_two_directions(&refiner, percepts, &sampled.pose)
-        })
-        .expect("a frame with lines");
+    let (sampled, percepts) = frame_with_lines(&refiner);
     let frames = std::slice::from_ref(&percepts);
     let at_truth = refiner.check_at(frames, &sampled.pose).expect("enough points");
     assert!(at_truth.passes(), "{at_truth:?}");
@@ -228,16 +222,7 @@ fn the_true_pose_passes_its_check_and_a_wrong_one_shows_where_it_disagrees() {
 #[test]
 fn a_prior_guess_near_the_truth_finds_the_place_a_lost_network_missed() {
     let refiner = LineRefiner::new(&FieldModel::default()).with_camera_correction(false);
-    let (sampled, percepts) = (0..40)
-        .map(rendered)
-        .map(|(sampled, frame)| {
-            let percepts = percepts(&refiner, &sampled, &frame);
-            (sampled, percepts)
-        })
-        .find(|(sampled, percepts)| {
-            percepts.points.len() > 100 && sees_two_directions(&refiner, percepts, &sampled.pose)
-        })
-        .expect("a frame with lines");
+    let (sampled, percepts) = frame_with_lines(&refiner);
     let truth = sampled.pose;
     let found = |estimate: &[Hypothesis]| {
         estimate.iter().any(|h| {

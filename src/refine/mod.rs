@@ -186,12 +186,12 @@ impl PoseCheck {
 
     /// Whether enough of the points lie on a line at the pose as given.
     pub fn inlier_share_passes(&self) -> bool {
-        self.inlier_share >= MIN_INLIER_SHARE
+        enough_inliers(self.inlier_share)
     }
 
     /// Whether few enough of the lines expected at the pose as given went unseen.
     pub fn unseen_share_passes(&self) -> bool {
-        self.unseen_share.is_none_or(|unseen| unseen <= MAX_UNSEEN_SHARE)
+        few_enough_unseen(self.unseen_share)
     }
 }
 
@@ -337,7 +337,7 @@ impl LineRefiner {
         Some(PoseCheck {
             points: observations.len(),
             inlier_share: 1.0 - off_lines.len() as f64 / observations.len() as f64,
-            unseen_share: (expected >= MIN_EXPECTED).then(|| unseen.len() as f64 / expected as f64),
+            unseen_share: unseen_share_of(expected, unseen.len()),
             off_lines,
             unseen,
             fit,
@@ -387,7 +387,7 @@ impl LineRefiner {
         let unseen_share = self.unseen_share(frames, &fitted.pose, &fitted.calibration);
         let quality = inlier_share * (1.0 - unseen_share.unwrap_or(0.0));
         let points = observations.len();
-        if inlier_share < MIN_INLIER_SHARE || unseen_share.is_some_and(|unseen| unseen > MAX_UNSEEN_SHARE) {
+        if !(enough_inliers(inlier_share) && few_enough_unseen(unseen_share)) {
             return LineFit {
                 pose: guess.pose,
                 sigma: guess.sigma,
@@ -494,7 +494,7 @@ impl LineRefiner {
             expected += 1;
             unseen += usize::from(!seen);
         });
-        (expected >= MIN_EXPECTED).then(|| unseen as f64 / expected as f64)
+        unseen_share_of(expected, unseen)
     }
 
     /// Calls `visit(frame, pixel, seen)` for every model-line sample some frame of the burst should
@@ -539,6 +539,22 @@ impl LineRefiner {
             .map(|stepped| (stepped - pixel).norm())
             .fold(0.0, f64::max)
     }
+}
+
+/// Whether a fit's share of points on a line is enough for it to stand.
+fn enough_inliers(inlier_share: f64) -> bool {
+    inlier_share >= MIN_INLIER_SHARE
+}
+
+/// Whether a fit's share of expected lines unseen (`None`: too few expected to tell) lets it stand.
+fn few_enough_unseen(unseen_share: Option<f64>) -> bool {
+    unseen_share.is_none_or(|unseen| unseen <= MAX_UNSEEN_SHARE)
+}
+
+/// The share of `expected` model-line samples of which `unseen` were not seen; `None` when too few
+/// were expected to tell.
+fn unseen_share_of(expected: usize, unseen: usize) -> Option<f64> {
+    (expected >= MIN_EXPECTED).then(|| unseen as f64 / expected as f64)
 }
 
 /// Whether a line must be seen where the camera looks: every line and circle, not a mark's arms.
