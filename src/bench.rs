@@ -36,7 +36,8 @@ pub enum Stage {
     Lines,
     /// Refining one hypothesis against those line points (search, fit and verification).
     Refine,
-    /// The global search over the whole field for places those line points fit.
+    /// The global search for places those line points fit: over the whole field and near the heaviest
+    /// hypothesis, as the pipeline searches when the lines are unsure.
     Search,
     /// A whole frame: preprocess, inference, unfold.
     Total,
@@ -177,7 +178,9 @@ pub fn run(
                 let _ =
                     pipeline::verify(&refiner, &percepts, &mut heaviest.clone(), &[], GlobalSearch::Never);
             }),
-            Stage::Search => median_ms(iterations, || drop(refiner.search(&percepts))),
+            Stage::Search => {
+                median_ms(iterations, || drop(pipeline::search_places(&refiner, &percepts, heaviest.first())))
+            }
             Stage::Total => median_ms(iterations, || drop(relocaliser.relocalise(&frame, 0.0))),
         };
         let slot = match stage {

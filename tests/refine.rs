@@ -75,7 +75,6 @@ fn sees_two_directions(refiner: &LineRefiner, percepts: &FramePercepts, truth: &
     })
 }
 
-/// Distances of the line points of frames 0..12 from the true lines, sorted.
 /// The first rendered frame with plenty of line points on two line directions, and its percepts.
 fn frame_with_lines(refiner: &LineRefiner) -> (SampledFrame, FramePercepts) {
     (0..40)
@@ -90,6 +89,7 @@ fn frame_with_lines(refiner: &LineRefiner) -> (SampledFrame, FramePercepts) {
         .expect("a frame with lines")
 }
 
+/// Distances of the line points of frames 0..12 from the true lines, sorted.
 fn distances_from_the_true_lines(render: fn(u64) -> (SampledFrame, Frame)) -> Vec<f64> {
     let field = FieldModel::default();
     let refiner = LineRefiner::new(&field);
@@ -255,6 +255,43 @@ fn a_prior_guess_near_the_truth_finds_the_place_a_lost_network_missed() {
     verify(&refiner, std::slice::from_ref(&percepts), &mut unhelped, &[nowhere], GlobalSearch::Never);
     assert_eq!(unhelped.len(), network.len());
     assert_eq!(unhelped.iter().map(|h| h.lines.unwrap().places).collect::<Vec<_>>(), [None, None]);
+}
+
+#[test]
+fn along_a_lone_line_the_hypotheses_keep_the_networks_spread() {
+    let refiner = LineRefiner::new(&FieldModel::default()).with_camera_correction(false);
+    // The first rendered frame whose lines, at the true pose, fix it across one line only.
+    let (truth, percepts, free) = (0..80)
+        .map(rendered)
+        .find_map(|(sampled, frame)| {
+            let percepts = percepts(&refiner, &sampled, &frame);
+            let check = refiner.check_at(std::slice::from_ref(&percepts), &sampled.pose)?;
+            let information = check.fit.line_information.fixed_view::<2, 2>(0, 0).into_owned();
+            let eigen = nalgebra::SymmetricEigen::new(information);
+            let (weakest, strongest) = (eigen.eigenvalues.imin(), eigen.eigenvalues.imax());
+            // Across the line a point's σ of 1.5 cm; along it, nothing.
+            let lone = check.passes()
+                && eigen.eigenvalues[strongest] > 1e4
+                && eigen.eigenvalues[weakest] < 1e-3 * eigen.eigenvalues[strongest];
+            lone.then(|| (sampled.pose, percepts, eigen.eigenvectors.column(weakest).into_owned()))
+        })
+        .expect("a frame along one line");
+    // An honest network, 1.5 m off along the line and saying it may be a metre off.
+    let guess = FieldPose::new(truth.x() + 1.5 * free.x, truth.y() + 1.5 * free.y, truth.heading()).unwrap();
+    let sigma = PoseSigma { x: 1.0, y: 1.0, theta: 5f64.to_radians() };
+    let mut estimate = hypotheses(&[(guess, 0.5), (Symmetry::PointReflection.apply(&guess), 0.5)], sigma);
+    verify(&refiner, std::slice::from_ref(&percepts), &mut estimate, &[], GlobalSearch::WhenUnsure);
+    let holds_the_truth = |h: &Hypothesis| {
+        (h.pose.x() - truth.x()).abs() <= 3.0 * h.sigma.x
+            && (h.pose.y() - truth.y()).abs() <= 3.0 * h.sigma.y
+            && (h.pose.heading() - truth.heading()).sin().abs() <= (3.0 * h.sigma.theta).sin()
+    };
+    let holding = estimate.iter().find(|h| holds_the_truth(h));
+    let holding = holding.unwrap_or_else(|| panic!("no hypothesis holds {truth:?} within 3 σ: {estimate:?}"));
+    // What the lines fix stays fixed; along the line the σ is the network's, not a fit's step.
+    let along = (holding.sigma.x * free.x).hypot(holding.sigma.y * free.y);
+    let across = (holding.sigma.x * free.y).hypot(holding.sigma.y * free.x);
+    assert!(along > 0.5 && across < 0.2, "σ along {along:.3} m, across {across:.3} m: {holding:?}");
 }
 
 #[test]

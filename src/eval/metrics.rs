@@ -127,6 +127,17 @@ pub const FOUND: (f64, f64) = (0.05, 1.0);
 /// Fewest line points for a burst to count as one the lines can settle (the refinement's own minimum).
 pub const LINE_POINTS: usize = 12;
 
+/// A hypothesis's σ is honest about a truth within this many of them.
+pub const SPREADS: f64 = 3.0;
+
+/// Whether `truth` lies within [`SPREADS`] σ of `hypothesis` along x, y and heading.
+fn within_spread(hypothesis: &Hypothesis, truth: &FieldPose) -> bool {
+    let sigma = &hypothesis.sigma;
+    (hypothesis.pose.x() - truth.x()).abs() <= SPREADS * sigma.x
+        && (hypothesis.pose.y() - truth.y()).abs() <= SPREADS * sigma.y
+        && angle_distance(hypothesis.pose.heading(), truth.heading()) <= SPREADS * sigma.theta
+}
+
 /// One burst after line refinement: its errors and what the lines did to its heaviest hypothesis.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RefinedEvaluation {
@@ -140,12 +151,15 @@ pub struct RefinedEvaluation {
     pub found: bool,
     /// Whether the heaviest hypothesis lies within [`FOUND`] of the truth or of its point twin.
     pub heaviest_right: bool,
+    /// Whether some hypothesis holds the truth or its point twin within [`SPREADS`] of its σ in x, y
+    /// and heading (the σ the hypotheses claim is honest).
+    pub within_spread: bool,
 }
 
 impl RefinedEvaluation {
     /// A burst with no hypothesis at all (no network, and no place fits its `points` line points).
     pub fn nothing(points: usize) -> Self {
-        Self { errors: None, check: None, points, found: false, heaviest_right: false }
+        Self { errors: None, check: None, points, found: false, heaviest_right: false, within_spread: false }
     }
 
     /// Scores a refined burst's hypotheses (heaviest first, at least one) against the robot's true pose.
@@ -162,6 +176,7 @@ impl RefinedEvaluation {
             points: heaviest.lines.map_or(0, |lines| lines.points),
             found: hypotheses.iter().any(|h| close(&h.pose, truth)),
             heaviest_right: close(&heaviest.pose, truth) || close(&heaviest.pose, &twin),
+            within_spread: hypotheses.iter().any(|h| within_spread(h, truth) || within_spread(h, &twin)),
         }
     }
 }
@@ -188,6 +203,9 @@ pub struct RefinedMetrics {
     /// Bursts whose heaviest hypothesis is `refined` but neither the truth nor its point twin lies
     /// within 5 cm and 1° of it, as a share of the `refined` bursts.
     pub wrong_refined_share: f64,
+    /// Of the bursts with at least [`LINE_POINTS`] line points, the share where no hypothesis holds
+    /// the truth (or its twin) within 3 σ: all of them, and by the heaviest hypothesis's verdict.
+    pub beyond_spread: BeyondSpread,
     /// Heaviest hypothesis vs truth, all bursts.
     pub modelled: ErrorStats,
     /// Closest hypothesis vs truth, all bursts.
@@ -198,6 +216,39 @@ pub struct RefinedMetrics {
     /// The lines at the true pose (`replay --check-truth`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub at_truth: Option<TruthMetrics>,
+}
+
+/// Shares of bursts with lines whose hypotheses' σ all miss the truth (see
+/// [`RefinedMetrics::beyond_spread`]); a share is 0 where no burst had that verdict.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct BeyondSpread {
+    /// All bursts with lines.
+    pub with_lines: f64,
+    /// Those whose heaviest hypothesis is `refined`.
+    pub refined: f64,
+    /// Those whose heaviest hypothesis is `partial`.
+    pub partial: f64,
+    /// Those whose heaviest hypothesis is `ambiguous`.
+    pub ambiguous: f64,
+}
+
+impl BeyondSpread {
+    fn of(evaluations: &[RefinedEvaluation]) -> Self {
+        let with_lines: Vec<&RefinedEvaluation> =
+            evaluations.iter().filter(|e| e.points >= LINE_POINTS).collect();
+        let share = |verdict: Option<LineCheck>| {
+            let chosen: Vec<&&RefinedEvaluation> =
+                with_lines.iter().filter(|e| verdict.is_none() || e.check == verdict).collect();
+            let beyond = chosen.iter().filter(|e| !e.within_spread).count();
+            if chosen.is_empty() { 0.0 } else { beyond as f64 / chosen.len() as f64 }
+        };
+        Self {
+            with_lines: share(None),
+            refined: share(Some(LineCheck::Refined)),
+            partial: share(Some(LineCheck::Partial)),
+            ambiguous: share(Some(LineCheck::Ambiguous)),
+        }
+    }
 }
 
 impl RefinedMetrics {
@@ -236,6 +287,7 @@ impl RefinedMetrics {
                     .count(),
                 refined.len(),
             ),
+            beyond_spread: BeyondSpread::of(evaluations),
             modelled: ErrorStats::of(&errors.iter().map(|e| e.modelled).collect::<Vec<_>>(), &[]),
             best_of_set: ErrorStats::of(&errors.iter().map(|e| e.best_of_set).collect::<Vec<_>>(), &[]),
             where_refined: (!refined.is_empty()).then(|| ErrorStats::of(&refined, &[])),
@@ -467,7 +519,8 @@ impl RefinedMetrics {
     pub fn verdicts(&self) -> String {
         format!(
             "{:.0}% refined, {:.0}% partial, {:.0}% ambiguous, {:.0}% unrefined, {:.0}% contradicted; \
-             with >= {LINE_POINTS} line points ({}): {:.1}% found within 5 cm / 1°; {:.1}% of refined wrong",
+             with >= {LINE_POINTS} line points ({}): {:.1}% found within 5 cm / 1°; {:.1}% of refined wrong; \
+             the truth beyond 3 σ of every hypothesis: {:.1}% (refined {:.1}%, partial {:.1}%, ambiguous {:.1}%)",
             100.0 * self.refined_share,
             100.0 * self.partial_share,
             100.0 * self.ambiguous_share,
@@ -475,7 +528,11 @@ impl RefinedMetrics {
             100.0 * self.contradicted_share,
             self.with_lines,
             100.0 * self.found_share_with_lines,
-            100.0 * self.wrong_refined_share
+            100.0 * self.wrong_refined_share,
+            100.0 * self.beyond_spread.with_lines,
+            100.0 * self.beyond_spread.refined,
+            100.0 * self.beyond_spread.partial,
+            100.0 * self.beyond_spread.ambiguous,
         )
     }
 }
@@ -555,5 +612,36 @@ mod tests {
         assert!(Metrics::summarise(&[], &[], &[]).is_none());
         assert!(metrics.bursts.is_none());
         assert!(metrics.table().contains("oracle"));
+    }
+
+    #[test]
+    fn a_truth_beyond_three_sigma_of_every_hypothesis_is_counted_by_verdict() {
+        use crate::geometry::PoseSigma;
+        use crate::refine::LineEvidence;
+        let truth = FieldPose::new(1.0, 2.0, 0.0).unwrap();
+        let hypothesis = |x: f64, sigma_x: f64, check: LineCheck| Hypothesis {
+            pose: FieldPose::new(x, 2.0, 0.0).unwrap(),
+            weight: 1.0,
+            sigma: PoseSigma { x: sigma_x, y: 0.02, theta: 0.01 },
+            lines: Some(LineEvidence {
+                check,
+                points: 40,
+                inlier_share: 1.0,
+                unseen_share: None,
+                places: None,
+            }),
+        };
+        // Along x, 1 m off: honest with σ 0.5 m, not with 0.2 m; the truth's twin counts too.
+        let honest = RefinedEvaluation::new(&truth, &[hypothesis(2.0, 0.5, LineCheck::Ambiguous)]);
+        let overconfident = RefinedEvaluation::new(&truth, &[hypothesis(2.0, 0.2, LineCheck::Ambiguous)]);
+        let twin = Symmetry::PointReflection.apply(&truth);
+        let at_twin = Hypothesis { pose: twin, ..hypothesis(0.0, 0.01, LineCheck::Refined) };
+        let refined = RefinedEvaluation::new(&truth, &[at_twin]);
+        assert!(honest.within_spread && !overconfident.within_spread && refined.within_spread);
+        let beyond = BeyondSpread::of(&[honest, overconfident, refined, RefinedEvaluation::nothing(5)]);
+        assert_eq!(
+            beyond,
+            BeyondSpread { with_lines: 1.0 / 3.0, refined: 0.0, partial: 0.0, ambiguous: 0.5 }
+        );
     }
 }

@@ -125,6 +125,7 @@ mod tests {
                 evidence,
                 factor: 1.0,
                 camera: None,
+                line_information: nalgebra::Matrix3::zeros(),
             },
         }
     }

@@ -406,16 +406,22 @@ impl std::str::FromStr for GlobalSearch {
 const NETWORK_FLOOR: f64 = 0.05;
 /// Least spread of a network hypothesis when it weighs places (metres, radians).
 const MIN_NETWORK_SIGMA: (f64, f64) = (0.1, 0.05);
+/// How far off a place's pose may be along what its lines leave open where no network hypothesis
+/// explains it (metres, radians): a lone line runs metres across the field.
+const UNINFORMED_SIGMA: (f64, f64) = (2.0, 0.5);
 
 /// Verifies and refines `hypotheses` against the line points of a burst's frames: each takes the fitted
 /// pose and σ where the lines support it, every one gets the lines' evidence, and the weights are
 /// scaled by the fits' quality (contradicted ones cut), renormalised and sorted heaviest first.
 /// The lines also check the `context` guesses (the poses the burst's priors name) and search near them
 /// ([`LineRefiner::search_near`]), and where `search`
-/// says so they look all over the field: if a context guess or the search finds a place, the
-/// hypotheses become the places the lines fit and their point-symmetric twins, weighted by the fit's
-/// quality and by how likely the network's hypotheses make them (never below a floor), and marked
-/// `ambiguous` when there is more than one place. Returns what the heaviest hypothesis's fit measured
+/// says so they look all over the field and near the heaviest hypothesis ([`search_places`]): if a
+/// context guess or the search finds a place, the hypotheses become the places the lines fit and their
+/// point-symmetric twins, weighted by the fit's quality and by how likely the network's hypotheses
+/// make them (never below a floor), and marked `ambiguous` when there is more than one place. Every
+/// σ keeps what the lines fix and, along what they leave open, the network's spread (or, for a place
+/// the network does not explain, [`UNINFORMED_SIGMA`]): a fit along one line does not know where on
+/// it the robot stands. Returns what the heaviest hypothesis's fit measured
 /// of the camera's correction on top of the frames' poses, where it ends `refined`.
 pub fn verify(
     refiner: &LineRefiner,
@@ -449,7 +455,11 @@ pub fn verify(
         GlobalSearch::Always => true,
     };
     if look {
-        found.extend(refiner.search(percepts));
+        found.extend(search_places(
+            refiner,
+            percepts,
+            hypotheses.iter().max_by(|a, b| a.weight.total_cmp(&b.weight)),
+        ));
     }
     let places = if look || !found.is_empty() { places(&fits, found) } else { Vec::new() };
     // Each hypothesis's camera measurement, in the hypotheses' order.
@@ -459,7 +469,7 @@ pub fn verify(
             *hypothesis = Hypothesis {
                 pose: fit.pose,
                 weight: hypothesis.weight * fit.factor,
-                sigma: fit.sigma,
+                sigma: fit.spread_with(&floored(&hypothesis.sigma)),
                 lines: Some(fit.evidence),
             };
             cameras.push(fit.camera);
@@ -477,7 +487,8 @@ pub fn verify(
             };
             for pose in [place.pose, Symmetry::PointReflection.apply(&place.pose)] {
                 let weight = place.factor * (NETWORK_FLOOR + network_likelihood(&pose, &network));
-                hypotheses.push(Hypothesis { pose, weight, sigma: place.sigma, lines: Some(evidence) });
+                let sigma = place.spread_with(&prior_spread(&pose, &network));
+                hypotheses.push(Hypothesis { pose, weight, sigma, lines: Some(evidence) });
                 cameras.push(place.camera);
             }
         }
@@ -491,6 +502,23 @@ pub fn verify(
         .and_then(|index| cameras[index]);
     hypotheses.sort_by(|a, b| b.weight.total_cmp(&a.weight));
     camera
+}
+
+/// The places the lines fit all over the field and, with a `heaviest` network hypothesis, near it
+/// (within twice its σ, [`LineRefiner::search_near`]): the coarse grid's best candidates field-wide
+/// can all lie along other lines than the one the network points to, and then the right place would
+/// be missing from an ambiguous burst.
+pub fn search_places(
+    refiner: &LineRefiner,
+    percepts: &[FramePercepts],
+    heaviest: Option<&Hypothesis>,
+) -> Vec<LineFit> {
+    let mut found = refiner.search(percepts);
+    if let Some(hypothesis) = heaviest {
+        found
+            .extend(refiner.search_near(percepts, &Guess { pose: hypothesis.pose, sigma: hypothesis.sigma }));
+    }
+    found
 }
 
 /// The places the lines fit: the network's hypotheses the lines supported (`fits`) and the places
@@ -512,16 +540,62 @@ fn network_likelihood(pose: &FieldPose, network: &[Hypothesis]) -> f64 {
     if network.is_empty() {
         return 1.0;
     }
-    network
+    network.iter().map(|hypothesis| likelihood_under(pose, hypothesis)).sum()
+}
+
+/// The share of `pose`'s network likelihood that `hypothesis` gives: its weight times its Gaussian
+/// (spread at least [`MIN_NETWORK_SIGMA`]) relative to the Gaussian's peak.
+fn likelihood_under(pose: &FieldPose, hypothesis: &Hypothesis) -> f64 {
+    let sigma = floored(&hypothesis.sigma);
+    let dx = (pose.x() - hypothesis.pose.x()) / sigma.x;
+    let dy = (pose.y() - hypothesis.pose.y()) / sigma.y;
+    let dtheta = angle_distance(pose.heading(), hypothesis.pose.heading()) / sigma.theta;
+    let exponent = -0.5 * (dx * dx + dy * dy + dtheta * dtheta);
+    hypothesis.weight * if exponent.is_finite() { exponent.exp() } else { 0.0 }
+}
+
+/// A network hypothesis's spread, at least [`MIN_NETWORK_SIGMA`].
+fn floored(sigma: &PoseSigma) -> PoseSigma {
+    PoseSigma {
+        x: sigma.x.max(MIN_NETWORK_SIGMA.0),
+        y: sigma.y.max(MIN_NETWORK_SIGMA.0),
+        theta: sigma.theta.max(MIN_NETWORK_SIGMA.1),
+    }
+}
+
+/// What is known about a place's pose before its lines: the spread of the network hypothesis that
+/// makes `pose` likeliest, where it explains the place better than the floor every place keeps;
+/// otherwise (and with no network) [`UNINFORMED_SIGMA`].
+fn prior_spread(pose: &FieldPose, network: &[Hypothesis]) -> PoseSigma {
+    let likeliest = network
         .iter()
-        .map(|hypothesis| {
-            let sigma = &hypothesis.sigma;
-            let dx = (pose.x() - hypothesis.pose.x()) / sigma.x.max(MIN_NETWORK_SIGMA.0);
-            let dy = (pose.y() - hypothesis.pose.y()) / sigma.y.max(MIN_NETWORK_SIGMA.0);
-            let dtheta = angle_distance(pose.heading(), hypothesis.pose.heading())
-                / sigma.theta.max(MIN_NETWORK_SIGMA.1);
-            let exponent = -0.5 * (dx * dx + dy * dy + dtheta * dtheta);
-            hypothesis.weight * if exponent.is_finite() { exponent.exp() } else { 0.0 }
-        })
-        .sum()
+        .map(|hypothesis| (likelihood_under(pose, hypothesis), hypothesis))
+        .max_by(|(a, _), (b, _)| a.total_cmp(b));
+    match likeliest {
+        Some((likelihood, hypothesis)) if likelihood >= NETWORK_FLOOR => floored(&hypothesis.sigma),
+        _ => PoseSigma { x: UNINFORMED_SIGMA.0, y: UNINFORMED_SIGMA.0, theta: UNINFORMED_SIGMA.1 },
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn network_hypothesis(x: f64, y: f64, weight: f64, sigma: f64) -> Hypothesis {
+        let pose = FieldPose::new(x, y, 0.0).unwrap();
+        Hypothesis { pose, weight, sigma: PoseSigma { x: sigma, y: sigma, theta: 0.01 }, lines: None }
+    }
+
+    #[test]
+    fn a_place_the_network_explains_takes_its_spread_and_any_other_is_uninformed() {
+        let network = [network_hypothesis(1.0, 0.0, 0.9, 0.8), network_hypothesis(-1.0, 0.0, 0.1, 0.3)];
+        let near = FieldPose::new(1.5, 0.3, 0.0).unwrap();
+        // The likeliest hypothesis decides; its heading σ is raised to the floor.
+        assert_eq!(prior_spread(&near, &network), PoseSigma { x: 0.8, y: 0.8, theta: MIN_NETWORK_SIGMA.1 });
+        let uninformed =
+            PoseSigma { x: UNINFORMED_SIGMA.0, y: UNINFORMED_SIGMA.0, theta: UNINFORMED_SIGMA.1 };
+        // Three metres from both, the place stands on the floor alone.
+        assert_eq!(prior_spread(&FieldPose::new(1.0, 3.0, 0.0).unwrap(), &network), uninformed);
+        assert_eq!(prior_spread(&near, &[]), uninformed);
+    }
 }

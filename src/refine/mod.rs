@@ -16,7 +16,7 @@ pub mod search;
 
 use std::sync::OnceLock;
 
-use nalgebra::{Point2, Point3, Vector2, Vector3};
+use nalgebra::{Matrix3, Point2, Point3, Vector2, Vector3};
 
 pub use calibration::{CalibrationTracker, CameraCalibration, CameraMeasurement};
 pub use line_map::LineMap;
@@ -146,6 +146,38 @@ pub struct LineFit {
     /// What a refined fit's lines say about the camera's (pitch, roll) correction on top of the
     /// frames' camera poses, where they fix it.
     pub camera: Option<CameraMeasurement>,
+    /// What the lines alone say about the fitted pose (x, y, heading): the information matrix of the
+    /// fit without its prior, degenerate along what they leave open; zero where contradicted.
+    pub line_information: Matrix3<f64>,
+}
+
+impl LineFit {
+    /// The same fit for the point-symmetric twin pose, which sees the same lines.
+    fn point_reflected(&self) -> LineFit {
+        // x and y change sign, the heading's rate does not.
+        let flip = Matrix3::from_diagonal(&Vector3::new(-1.0, -1.0, 1.0));
+        LineFit {
+            pose: Symmetry::PointReflection.apply(&self.pose),
+            line_information: flip * self.line_information * flip,
+            ..*self
+        }
+    }
+
+    /// The fitted pose's spread under the lines and an independent `prior` about it: what the lines
+    /// fix keeps their spread, what they leave open (along a lone line) keeps the prior's. The same for
+    /// the point-symmetric twin.
+    pub fn spread_with(&self, prior: &PoseSigma) -> PoseSigma {
+        let prior_information =
+            Matrix3::from_diagonal(&Vector3::new(prior.x.powi(-2), prior.y.powi(-2), prior.theta.powi(-2)));
+        match (self.line_information + prior_information).try_inverse() {
+            Some(covariance) => PoseSigma {
+                x: covariance[(0, 0)].max(0.0).sqrt(),
+                y: covariance[(1, 1)].max(0.0).sqrt(),
+                theta: covariance[(2, 2)].max(0.0).sqrt(),
+            },
+            None => *prior,
+        }
+    }
 }
 
 /// The lines' answer for a burst's guesses.
@@ -282,9 +314,7 @@ impl LineRefiner {
                     && angle_distance(image.heading(), guess.pose.heading()) < 1e-6
             });
             fits.push(match twin {
-                Some(twin) => {
-                    LineFit { pose: Symmetry::PointReflection.apply(&fits[twin].pose), ..fits[twin] }
-                }
+                Some(twin) => fits[twin].point_reflected(),
                 None => self.check_one(frames, &observations, guess),
             });
         }
@@ -400,6 +430,7 @@ impl LineRefiner {
                 },
                 factor: quality.max(0.01).powi(2) * CONTRADICTED_FACTOR,
                 camera: None,
+                line_information: Matrix3::zeros(),
             };
         }
         let line_sigma = fitted
@@ -423,6 +454,7 @@ impl LineRefiner {
             evidence: LineEvidence { check, points, inlier_share, unseen_share, places: None },
             factor: quality.powi(2),
             camera: measured,
+            line_information: fitted.line_information,
         }
     }
 
@@ -654,6 +686,7 @@ mod tests {
             },
             factor: 1.0,
             camera: None,
+            line_information: Matrix3::zeros(),
         }
     }
 
@@ -732,5 +765,27 @@ mod tests {
         for point in [Point2::new(half_length, half_width), Point2::new(0.0, -half_width)] {
             assert!(samples.iter().any(|sample| (sample - point).norm() < 1e-9), "{point:?}");
         }
+    }
+
+    #[test]
+    fn the_lines_fix_what_they_see_and_the_prior_keeps_the_rest_for_either_twin() {
+        // Points along a line parallel to x: y and the heading are fixed, x is left open.
+        let mut along_x = fit(1.0, 3.0, 0.3, (0.6, 0.01, 0.01));
+        along_x.line_information = Matrix3::new(0.0, 0.0, 0.0, 0.0, 1e4, 2e3, 0.0, 2e3, 1e4);
+        let prior = PoseSigma { x: 1.5, y: 1.5, theta: 0.2 };
+        let spread = along_x.spread_with(&prior);
+        assert!((spread.x - 1.5).abs() < 1e-9, "{spread:?}");
+        assert!(spread.y < 0.011 && spread.theta < 0.011, "{spread:?}");
+        let twin = along_x.point_reflected();
+        assert_eq!(twin.pose, Symmetry::PointReflection.apply(&along_x.pose));
+        assert_eq!(twin.line_information[(1, 2)], -2e3);
+        let twin_spread = twin.spread_with(&prior);
+        for (a, b) in
+            [(spread.x, twin_spread.x), (spread.y, twin_spread.y), (spread.theta, twin_spread.theta)]
+        {
+            assert!((a - b).abs() < 1e-12);
+        }
+        // Where the lines say nothing (contradicted) the prior is all there is.
+        assert_eq!(fit(0.0, 0.0, 0.0, (0.1, 0.1, 0.1)).spread_with(&prior), prior);
     }
 }
