@@ -141,13 +141,8 @@ pub fn isa_set() -> crate::isa::IsaSet {
     if avxvnni::has_avxvnni() {
         set = set.with(Isa::X86_64AvxVnni);
     }
-    #[cfg(tract_amx_int8)]
-    if amx::has_amx_int8() {
-        set = set.with(Isa::X86_64AmxInt8);
-    }
-    #[cfg(tract_amx_bf16)]
-    if amx_bf16::has_amx_bf16() {
-        set = set.with(Isa::X86_64AmxBf16);
-    }
+    // relocd: the AMX kernels are never offered. `avx512amx_mmm_i32_8x8` segfaults now and then
+    // (1 in 100 single-threaded runs of relocd's model tests on an AMX machine, 3 in 60 with the
+    // tests in parallel; none in 100 without AMX); see PATCH.md. The Nao's CPUs have no AMX.
     set
 }
