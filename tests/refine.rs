@@ -8,6 +8,7 @@
 
 use image::{Rgb, RgbImage};
 use relocd::frame::{Frame, YuyvImage};
+use relocd::geometry::angle::angle_distance;
 use relocd::geometry::{Camera, CameraIntrinsics, CameraPose, FieldModel, FieldPose, PoseSigma, Symmetry};
 use relocd::pipeline::{GlobalSearch, Hypothesis, Pipeline, Priors, verify};
 use relocd::refine::line_map::Primitive;
@@ -284,7 +285,7 @@ fn along_a_lone_line_the_hypotheses_keep_the_networks_spread() {
     let holds_the_truth = |h: &Hypothesis| {
         (h.pose.x() - truth.x()).abs() <= 3.0 * h.sigma.x
             && (h.pose.y() - truth.y()).abs() <= 3.0 * h.sigma.y
-            && (h.pose.heading() - truth.heading()).sin().abs() <= (3.0 * h.sigma.theta).sin()
+            && angle_distance(h.pose.heading(), truth.heading()) <= 3.0 * h.sigma.theta
     };
     let holding = estimate.iter().find(|h| holds_the_truth(h));
     let holding = holding.unwrap_or_else(|| panic!("no hypothesis holds {truth:?} within 3 σ: {estimate:?}"));
