@@ -262,7 +262,7 @@ impl fmt::Display for BenchReport {
             ("fusion (burst of 5)", self.stages.fusion_ms),
             ("lines (one frame)", self.stages.lines_ms),
             ("refine (one hypothesis)", self.stages.refine_ms),
-            ("search (whole field)", self.stages.search_ms),
+            ("search (when unsure)", self.stages.search_ms),
             ("total (one frame)", self.stages.total_ms),
         ];
         for (name, median) in stages {
