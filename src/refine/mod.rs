@@ -169,15 +169,16 @@ impl LineFit {
     pub fn spread_with(&self, prior: &PoseSigma) -> PoseSigma {
         let prior_information =
             Matrix3::from_diagonal(&Vector3::new(prior.x.powi(-2), prior.y.powi(-2), prior.theta.powi(-2)));
-        match (self.line_information + prior_information).try_inverse() {
-            Some(covariance) => PoseSigma {
-                x: covariance[(0, 0)].max(0.0).sqrt(),
-                y: covariance[(1, 1)].max(0.0).sqrt(),
-                theta: covariance[(2, 2)].max(0.0).sqrt(),
-            },
-            None => *prior,
-        }
+        (self.line_information + prior_information)
+            .try_inverse()
+            .map_or(*prior, |covariance| spread_of(&covariance))
     }
+}
+
+/// The standard deviations on the diagonal of a pose's `covariance` (x, y, heading).
+fn spread_of(covariance: &Matrix3<f64>) -> PoseSigma {
+    let sigma = covariance.diagonal().map(|variance| variance.max(0.0).sqrt());
+    PoseSigma { x: sigma.x, y: sigma.y, theta: sigma.z }
 }
 
 /// The lines' answer for a burst's guesses.
@@ -443,14 +444,13 @@ impl LineRefiner {
         }) && self.off_the_main_direction(observations, &fitted.pose, &fitted.calibration)
             >= MIN_POINTS;
         let check = if fixed { LineCheck::Refined } else { LineCheck::Partial };
-        let sigma = fitted.covariance.diagonal().map(|variance| variance.max(0.0).sqrt());
         let measured = fitted
             .camera_information
             .filter(|_| fixed)
             .and_then(|information| CameraMeasurement::from_fit(fitted.calibration, &information, &camera));
         LineFit {
             pose: fitted.pose,
-            sigma: PoseSigma { x: sigma.x, y: sigma.y, theta: sigma.z },
+            sigma: spread_of(&fitted.covariance),
             evidence: LineEvidence { check, points, inlier_share, unseen_share, places: None },
             factor: quality.powi(2),
             camera: measured,

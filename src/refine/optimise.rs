@@ -1,8 +1,8 @@
 //! Fitting a robot pose to line points: a coarse search over the starting pose's uncertainty, then
 //! Levenberg–Marquardt on point-to-line distances with a Cauchy loss and the starting pose as a
-//! prior (Gaussian near it, Cauchy far from it). The fit also estimates a small correction of the camera's pitch and roll (a robot's
-//! calibration error, which bends every ground point the same way), held to zero by a prior. The
-//! covariance comes from the final normal equations.
+//! prior (Gaussian near it, Cauchy far from it). The fit also estimates a small correction of the
+//! camera's pitch and roll (a robot's calibration error, which bends every ground point the same way),
+//! held to zero by a prior. The covariance comes from the final normal equations.
 
 use nalgebra::{Matrix2, Matrix3, Point2, SMatrix, SVector, Vector2, Vector3};
 
@@ -99,18 +99,29 @@ fn to_field(pose: &Vector3<f64>, ground: &Point2<f64>) -> Point2<f64> {
     Point2::new(pose.x + cos * ground.x - sin * ground.y, pose.y + sin * ground.x + cos * ground.y)
 }
 
+/// A point's loss at `normalised` of its σ from the nearest line.
 fn cauchy(normalised: f64) -> f64 {
-    0.5 * CAUCHY_SCALE * CAUCHY_SCALE * (normalised / CAUCHY_SCALE).powi(2).ln_1p()
+    cauchy_loss((normalised / CAUCHY_SCALE).powi(2), CAUCHY_SCALE)
+}
+
+/// The Cauchy loss of `scale` at a residual whose square, in units of `scale`, is `ratio_squared`.
+fn cauchy_loss(ratio_squared: f64, scale: f64) -> f64 {
+    0.5 * scale * scale * ratio_squared.ln_1p()
+}
+
+/// The IRLS weight of [`cauchy_loss`] at `ratio_squared`.
+fn cauchy_weight(ratio_squared: f64) -> f64 {
+    1.0 / (1.0 + ratio_squared)
 }
 
 /// The prior's loss at a pose whose residual from it (in σ) has squared norm `squared`.
 fn prior_loss(squared: f64) -> f64 {
-    0.5 * PRIOR_SCALE * PRIOR_SCALE * (squared / (PRIOR_SCALE * PRIOR_SCALE)).ln_1p()
+    cauchy_loss(squared / (PRIOR_SCALE * PRIOR_SCALE), PRIOR_SCALE)
 }
 
 /// The IRLS weight of [`prior_loss`] at `squared`.
 fn prior_weight(squared: f64) -> f64 {
-    1.0 / (1.0 + squared / (PRIOR_SCALE * PRIOR_SCALE))
+    cauchy_weight(squared / (PRIOR_SCALE * PRIOR_SCALE))
 }
 
 fn prior_residual(pose: &Vector3<f64>, prior: &Prior) -> Vector3<f64> {
@@ -163,9 +174,9 @@ fn linearise(
         let field = to_field(&pose, &ground);
         let (distance, normal) = map.residual(field);
         let error = distance / observation.sigma;
-        cost += cauchy(error);
-        // IRLS weight of the Cauchy loss.
-        let weight = 1.0 / (1.0 + (error / CAUCHY_SCALE).powi(2));
+        let ratio_squared = (error / CAUCHY_SCALE).powi(2);
+        cost += cauchy_loss(ratio_squared, CAUCHY_SCALE);
+        let weight = cauchy_weight(ratio_squared);
         let rotated = rotate(&ground.coords);
         let [pitch_rate, roll_rate] = match calibrate {
             true => observation.calibration_rates.each_ref().map(rotate),
@@ -183,9 +194,10 @@ fn linearise(
     }
     let sigma = state_sigma(prior);
     let pose_residual = prior_residual(&pose, prior);
-    let pose_weight = prior_weight(pose_residual.norm_squared());
+    let pose_squared = pose_residual.norm_squared();
+    let pose_weight = prior_weight(pose_squared);
     let camera_residual = calibration.component_div(&prior.camera_sigma);
-    cost += prior_loss(pose_residual.norm_squared()) + 0.5 * camera_residual.norm_squared();
+    cost += prior_loss(pose_squared) + 0.5 * camera_residual.norm_squared();
     // The pose's prior weighted as its loss says (IRLS); the camera's stays Gaussian.
     let weights = State::new(pose_weight, pose_weight, pose_weight, 1.0, 1.0);
     let residual =
