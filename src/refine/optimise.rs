@@ -17,8 +17,8 @@ const CAUCHY_SCALE: f64 = 2.0;
 /// deviations: a guess a σ or more off (a network is lost now and then) pulls the fit much less than a
 /// Gaussian would, so what little the lines say along a line decides there; near the guess the loss is
 /// the Gaussian's, and where the lines say nothing at all the fit stays at the guess. (On tuning seeds
-/// 2 σ and a Gaussian found fewer poses, 0.5 σ more but fixed the camera's calibration on fewer
-/// bursts; BENCHMARKS.md, "A prior that yields".)
+/// 2 σ and a Gaussian found fewer poses, 0.5 σ more but fewer bursts' camera measurements agreed;
+/// BENCHMARKS.md, "A prior that yields".)
 const PRIOR_SCALE: f64 = 1.0;
 /// Coarse search: offsets per axis, in steps, each side of the start.
 const SEARCH_STEPS: i32 = 2;
