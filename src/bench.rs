@@ -130,24 +130,25 @@ pub struct BenchReport {
     pub iterations: usize,
     /// The frame timed: format and size.
     pub frame: String,
+    /// Frames of line points the refine and search stages fit.
+    pub line_frames: usize,
     /// Per-stage medians.
     pub stages: StageMedians,
 }
 
-/// Times `stages` of relocalising `frame` (default: a rendered 640×480 YUYV top-camera frame, with its
-/// camera pose; a given frame is taken as seen by a standing robot) with `model`, `iterations` times
-/// each (after a short warm-up); medians in milliseconds.
+/// Times `stages` of relocalising `frame` seen from its camera pose (default: a rendered 640×480 YUYV
+/// top-camera frame, with its camera pose) with `model`, `iterations` times
+/// each (after a short warm-up), the refine and search stages on `line_frames` copies of the frame's
+/// line points (a standing robot's burst); medians in milliseconds.
 pub fn run(
     model: Model,
     model_name: String,
-    frame: Option<Frame>,
+    frame: Option<(Frame, CameraPose)>,
     stages: &[Stage],
     iterations: usize,
+    line_frames: usize,
 ) -> anyhow::Result<BenchReport> {
-    let (frame, camera_pose) = match frame {
-        Some(frame) => (frame, CameraPose::STANDING),
-        None => camera_frame(),
-    };
+    let (frame, camera_pose) = frame.unwrap_or_else(camera_frame);
     let spec = model.contract().input.clone();
     let input = preprocess(&frame, &spec).context("the benchmark frame does not fit the model")?;
     let raw = model.run(&input)?;
@@ -156,7 +157,7 @@ pub fn run(
     let burst = vec![prediction.clone(); BURST];
     let refiner = LineRefiner::new(&FieldModel::new(model.contract().field.clone()));
     let intrinsics = model.contract().camera;
-    let percepts = [refiner.percepts(&frame, &intrinsics, &camera_pose)?];
+    let percepts = vec![refiner.percepts(&frame, &intrinsics, &camera_pose)?; line_frames.max(1)];
     let mut heaviest = pipeline::fuse(std::slice::from_ref(&prediction))?.hypotheses;
     heaviest.truncate(1);
     let backend = model.backend();
@@ -204,6 +205,7 @@ pub fn run(
         cpu: cpu_name(),
         iterations,
         frame: format!("{format} {width}x{height}"),
+        line_frames: percepts.len(),
         stages: medians,
     })
 }
@@ -255,6 +257,13 @@ impl fmt::Display for BenchReport {
             self.isa
         )?;
         writeln!(formatter, "frame   {}, medians of {} runs, one thread", self.frame, self.iterations)?;
+        if self.line_frames > 1 {
+            writeln!(
+                formatter,
+                "lines   refine and search fit {} copies of the frame's line points",
+                self.line_frames
+            )?;
+        }
         let stages = [
             ("preprocess", self.stages.preprocess_ms),
             ("inference", self.stages.inference_ms),
@@ -295,11 +304,13 @@ mod tests {
     #[test]
     fn the_report_has_the_requested_stages_only() {
         let model = crate::relocaliser::default_model().unwrap();
-        let report = run(model, "built-in".into(), None, &[Stage::Unfold, Stage::Fusion], 2).unwrap();
+        let report = run(model, "built-in".into(), None, &[Stage::Unfold, Stage::Fusion], 2, 3).unwrap();
         let json = serde_json::to_value(&report).unwrap();
         let stages = json["stages"].as_object().unwrap();
         assert_eq!(stages.keys().collect::<Vec<_>>(), ["fusion_ms", "unfold_ms"]);
         assert!(stages.values().all(|value| value.as_f64().unwrap() >= 0.0));
         assert_eq!(json["isa"], kernel_isa());
+        assert_eq!(json["line_frames"], 3);
+        assert!(report.to_string().contains("3 copies of the frame's line points"), "{report}");
     }
 }

@@ -14,7 +14,7 @@ use tracing::info;
 use relocd::bench::Stage;
 use relocd::daemon::config::{Config, Listen, SensorInput, SourceSpec};
 use relocd::daemon::record::RecordOptions;
-use relocd::geometry::{CameraIntrinsics, FieldDimensions, FieldModel, Representation};
+use relocd::geometry::{CameraIntrinsics, CameraPose, FieldDimensions, FieldModel, Representation};
 use relocd::pipeline::priors::simulate::PriorSpec;
 use relocd::pipeline::{GlobalSearch, Pipeline};
 use relocd::protocol::address::Address;
@@ -97,12 +97,26 @@ struct BenchArgs {
     /// Timed runs per stage.
     #[arg(long, default_value_t = 100, value_parser = clap::value_parser!(u32).range(1..=100_000))]
     iterations: u32,
-    /// Time only these stages (repeatable): preprocess, inference, unfold, fusion, total.
+    /// Time only these stages (repeatable): preprocess, inference, unfold, fusion, lines, refine, search,
+    /// total.
     #[arg(long)]
     stage: Vec<Stage>,
     /// Relocalise this image (PNG or JPEG) instead of a rendered 640×480 YUYV frame.
     #[arg(long)]
     frame: Option<PathBuf>,
+    /// Height of the --frame's camera above the ground, metres [default: a standing Nao's, 0.5].
+    #[arg(long, requires = "frame")]
+    camera_height: Option<f64>,
+    /// Pitch of the --frame's camera, degrees, positive looks down [default: a standing Nao's, 1.2].
+    #[arg(long, requires = "frame", allow_negative_numbers = true)]
+    camera_pitch: Option<f64>,
+    /// Roll of the --frame's camera, degrees [default: 0].
+    #[arg(long, requires = "frame", allow_negative_numbers = true)]
+    camera_roll: Option<f64>,
+    /// Frames of line points the refine and search stages fit: the benchmark frame's, repeated, as a
+    /// standing robot's burst gives them (the daemon fits a burst of five).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=16))]
+    line_frames: u32,
 }
 
 #[derive(Debug, clap::Args)]
@@ -541,12 +555,21 @@ fn bench(args: BenchArgs) -> anyhow::Result<()> {
     let frame = match &args.frame {
         Some(path) => {
             let image = image::open(path).with_context(|| format!("--frame {}", path.display()))?;
-            Some(relocd::frame::Frame::Rgb(image.to_rgb8()))
+            let standing = CameraPose::STANDING;
+            let camera = CameraPose::new(
+                args.camera_height.unwrap_or(standing.height()),
+                args.camera_pitch.map_or(standing.pitch(), f64::to_radians),
+                args.camera_roll.map_or(standing.roll(), f64::to_radians),
+                0.0,
+            )
+            .context("--camera-height/--camera-pitch/--camera-roll")?;
+            Some((relocd::frame::Frame::Rgb(image.to_rgb8()), camera))
         }
         None => None,
     };
     let stages = if args.stage.is_empty() { Stage::ALL.to_vec() } else { args.stage };
-    let report = relocd::bench::run(model, name, frame, &stages, args.iterations as usize)?;
+    let report =
+        relocd::bench::run(model, name, frame, &stages, args.iterations as usize, args.line_frames as usize)?;
     if args.json {
         println!("{}", serde_json::to_string(&report).expect("the report serialises"));
     } else {

@@ -39,6 +39,10 @@ const POINT_SIGMA: f64 = 0.015;
 const PITCH_SIGMA: f64 = 0.005;
 /// Farthest line point used, metres.
 const MAX_POINT_DISTANCE: f64 = 5.0;
+/// Most line points a burst's fits use, evenly spread over its frames and weighted to stand for the
+/// rest: one frame's worth ([`percepts::MAX_POINTS`]), so that every fit costs what one frame's does
+/// however many frames the burst has.
+const MAX_BURST_POINTS: usize = percepts::MAX_POINTS;
 /// Nearest and farthest model line the camera is expected to see, metres.
 const EXPECTED_RANGE: (f64, f64) = (0.3, 3.0);
 /// Spacing of the model-line samples checked for being seen, metres.
@@ -344,7 +348,7 @@ impl LineRefiner {
 
     /// What the burst's lines say about `pose` (see [`PoseCheck`]); `None` with too few line points.
     pub fn check_at(&self, frames: &[FramePercepts], pose: &FieldPose) -> Option<PoseCheck> {
-        let located: Vec<(usize, Point2<f64>, Observation)> = located_observations(frames).collect();
+        let located = located_observations(frames);
         if located.len() < MIN_POINTS {
             return None;
         }
@@ -643,35 +647,87 @@ fn camera_calibration(frames: &[FramePercepts]) -> CameraCalibration {
     }
 }
 
-/// The line points of all frames as observations with their σ.
+/// The line points of all frames as observations with their σ (see [`located_observations`]).
 fn observations(frames: &[FramePercepts]) -> Vec<Observation> {
-    located_observations(frames).map(|(_, _, observation)| observation).collect()
+    located_observations(frames).into_iter().map(|(_, _, observation)| observation).collect()
 }
 
 /// The line points of all frames within reach, each with its frame's index in the burst, its pixel and
-/// its observation.
-fn located_observations(
-    frames: &[FramePercepts],
-) -> impl Iterator<Item = (usize, Point2<f64>, Observation)> + '_ {
-    frames.iter().enumerate().flat_map(|(index, frame)| {
-        let height = frame.camera_height();
-        frame.points.iter().filter_map(move |point| {
-            let distance = point.ground.coords.norm();
-            (distance <= MAX_POINT_DISTANCE).then(|| {
-                let sigma = POINT_SIGMA + distance * distance / height * PITCH_SIGMA;
-                (
-                    index,
-                    point.pixel,
-                    Observation { ground: point.ground, sigma, calibration_rates: point.calibration_rates },
-                )
-            })
+/// its observation: at most [`MAX_BURST_POINTS`], each frame's share evenly spread over its points,
+/// the frames' samples interleaved (a standing robot's frames see the same lines: the burst keeps
+/// points from all over the view rather than the same ones from every frame), and each kept point
+/// weighted to stand for the points left out.
+fn located_observations(frames: &[FramePercepts]) -> Vec<(usize, Point2<f64>, Observation)> {
+    let per_frame: Vec<Vec<(usize, Point2<f64>, Observation)>> = frames
+        .iter()
+        .enumerate()
+        .map(|(index, frame)| {
+            let height = frame.camera_height();
+            let within = frame.points.iter().filter(|point| point.ground.coords.norm() <= MAX_POINT_DISTANCE);
+            within
+                .map(|point| {
+                    let distance = point.ground.coords.norm();
+                    let observation = Observation {
+                        ground: point.ground,
+                        sigma: POINT_SIGMA + distance * distance / height * PITCH_SIGMA,
+                        weight: 1.0,
+                        calibration_rates: point.calibration_rates,
+                    };
+                    (index, point.pixel, observation)
+                })
+                .collect()
         })
-    })
+        .collect();
+    let total: usize = per_frame.iter().map(Vec::len).sum();
+    if total <= MAX_BURST_POINTS {
+        return per_frame.into_iter().flatten().collect();
+    }
+    // Frame f keeps its points at (k + f / frames) strides, so identical frames keep different points.
+    let stride = total as f64 / MAX_BURST_POINTS as f64;
+    let phases = per_frame.len() as f64;
+    let kept: Vec<(usize, Point2<f64>, Observation)> = per_frame
+        .iter()
+        .enumerate()
+        .flat_map(|(index, points)| {
+            (0..)
+                .map(move |k| ((k as f64 + index as f64 / phases) * stride) as usize)
+                .take_while(|&at| at < points.len())
+                .map(|at| points[at])
+        })
+        .take(MAX_BURST_POINTS)
+        .collect();
+    let weight = total as f64 / kept.len() as f64;
+    kept.into_iter()
+        .map(|(index, pixel, observation)| (index, pixel, Observation { weight, ..observation }))
+        .collect()
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::sim::{Randomisation, render};
+
+    #[test]
+    fn a_burst_of_one_view_keeps_one_frame_s_worth_of_points_from_all_over_it_standing_for_all() {
+        // The benchmark's frame: a penalty-area corner and the goal line.
+        let field = FieldModel::default();
+        let sampled = Randomisation::default().sample(&field, 4000, 0, 1);
+        let intrinsics = CameraIntrinsics::nao_top();
+        let camera = Camera::new(intrinsics, &sampled.pose, &sampled.camera);
+        let frame = Frame::Rgb(render(&sampled.scene, &camera, &sampled.settings));
+        let percepts = detect(&frame, &intrinsics, &sampled.camera, field.dimensions().line_width).unwrap();
+        let one = observations(std::slice::from_ref(&percepts));
+        assert!(5 * one.len() > MAX_BURST_POINTS, "{}", one.len());
+        let burst = observations(&vec![percepts; 5]);
+        assert!(burst.len() <= MAX_BURST_POINTS, "{}", burst.len());
+        assert!(burst.len() >= MAX_BURST_POINTS.min(5 * one.len()) - 5, "{}", burst.len());
+        let distinct =
+            one.iter().filter(|point| burst.iter().any(|kept| kept.ground == point.ground)).count();
+        assert!(distinct as f64 >= 0.9 * one.len().min(burst.len()) as f64, "{distinct} of {}", one.len());
+        // The kept points stand for all five frames' points.
+        let weight: f64 = burst.iter().map(|observation| observation.weight).sum();
+        assert!((weight - 5.0 * one.len() as f64).abs() < 1e-6, "{weight}");
+    }
 
     fn fit(x: f64, y: f64, theta: f64, sigma: (f64, f64, f64)) -> LineFit {
         LineFit {
@@ -726,6 +782,7 @@ mod tests {
             .map(|(x, y)| Observation {
                 ground: Point2::new(x, y),
                 sigma: POINT_SIGMA,
+                weight: 1.0,
                 calibration_rates: [Vector2::zeros(); 2],
             })
             .collect()

@@ -326,6 +326,7 @@ mod tests {
         let far = [Observation {
             ground: Point2::new(9.0, 0.0),
             sigma: 0.02,
+            weight: 1.0,
             calibration_rates: [nalgebra::Vector2::zeros(); 2],
         }];
         assert!(search.candidates(&far, 10, 0.12, None).is_empty(), "points beyond reach are left out");

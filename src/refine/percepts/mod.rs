@@ -63,7 +63,7 @@ const RUNNING_WEIGHT: f32 = 1.0 / 32.0;
 /// crossing of the other family (see [`chains::near_any`]).
 const JUNCTION_REACH: f64 = 1.5;
 /// Line points kept per frame at most (evenly thinned beyond).
-const MAX_POINTS: usize = 400;
+pub const MAX_POINTS: usize = 400;
 
 /// Why a frame could not be searched for lines.
 #[derive(Debug, Error, PartialEq)]
