@@ -137,9 +137,9 @@ pub struct BenchReport {
 }
 
 /// Times `stages` of relocalising `frame` seen from its camera pose (default: a rendered 640×480 YUYV
-/// top-camera frame, with its camera pose) with `model`, `iterations` times
-/// each (after a short warm-up), the refine and search stages on `line_frames` copies of the frame's
-/// line points (a standing robot's burst); medians in milliseconds.
+/// top-camera frame, with its camera pose) with `model`, `iterations` times each (after a short
+/// warm-up), the refine and search stages on `line_frames` copies of the frame's line points (a
+/// standing robot's burst); medians in milliseconds.
 pub fn run(
     model: Model,
     model_name: String,
