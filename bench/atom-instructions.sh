@@ -8,7 +8,8 @@
 # Each stage runs under `valgrind --tool=callgrind` with TRACT_CPU_ISA taking away every AVX-era
 # feature, so tract uses the generic kernels an Atom gets; the count of 1 run is subtracted from
 # the count of 1 + N runs, which leaves N runs of the stage and nothing of start-up or model loading
-# (N = 10, or 1000 for the microsecond stages, whose counts are otherwise lost in start-up noise).
+# (N = 10; 1000 for the microsecond stages, whose counts are otherwise lost in start-up noise, 100 for
+# the line points and one fit, 2 for a whole burst).
 # Instruction counts are repeatable (same binary, input and environment), unlike times on a shared VM.
 #
 # The estimate assumes ATOM_IPC instructions per cycle (default 1.0) at 1.91 GHz (E3845 base clock):
@@ -37,9 +38,9 @@ count() {
 
 printf '%-44s %-10s %16s %14s\n' model stage "instructions" "Atom est. ms"
 for model in "${models[@]}"; do
-    for stage in preprocess inference unfold fusion lines refine search total; do
+    for stage in preprocess inference unfold fusion lines refine search total burst; do
         runs=10
-        case "$stage" in unfold | fusion) runs=1000 ;; lines | refine) runs=100 ;; esac
+        case "$stage" in unfold | fusion) runs=1000 ;; lines | refine) runs=100 ;; burst) runs=2 ;; esac
         one=$(count "$model" "$stage" 1)
         more=$(count "$model" "$stage" $((runs + 1)))
         per_run=$(( (more - one) / runs ))

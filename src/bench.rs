@@ -11,9 +11,8 @@ use serde::Serialize;
 
 use crate::frame::{Frame, YuyvImage};
 use crate::geometry::{Camera, CameraIntrinsics, CameraPose, FieldModel};
-use crate::pipeline::{self, GlobalSearch};
-use crate::refine::LineRefiner;
-use crate::relocaliser::{Backend, Model, Prediction, Relocaliser, kernel_isa, preprocess};
+use crate::pipeline::{self, GlobalSearch, Pipeline, Priors};
+use crate::relocaliser::{Backend, Model, Prediction, kernel_isa, preprocess};
 use crate::sim::{Randomisation, render};
 
 /// Frames in the fused burst, as the daemon captures by default.
@@ -41,11 +40,14 @@ pub enum Stage {
     Search,
     /// A whole frame: preprocess, inference, unfold.
     Total,
+    /// A whole burst of five copies of the frame as the daemon runs it: each frame's network and line
+    /// points, fusion, the line fits and, always (its worst case), the global search.
+    Burst,
 }
 
 impl Stage {
     /// Every stage, in pipeline order.
-    pub const ALL: [Stage; 8] = [
+    pub const ALL: [Stage; 9] = [
         Stage::Preprocess,
         Stage::Inference,
         Stage::Unfold,
@@ -54,6 +56,7 @@ impl Stage {
         Stage::Refine,
         Stage::Search,
         Stage::Total,
+        Stage::Burst,
     ];
 
     fn name(self) -> &'static str {
@@ -66,6 +69,7 @@ impl Stage {
             Stage::Refine => "refine",
             Stage::Search => "search",
             Stage::Total => "total",
+            Stage::Burst => "burst",
         }
     }
 }
@@ -81,7 +85,7 @@ impl FromStr for Stage {
 
     fn from_str(name: &str) -> Result<Self, Self::Err> {
         Stage::ALL.into_iter().find(|stage| stage.name() == name).ok_or_else(|| {
-            format!("unknown stage {name:?}: expected preprocess, inference, unfold, fusion, lines, refine, search or total")
+            format!("unknown stage {name:?}: expected preprocess, inference, unfold, fusion, lines, refine, search, total or burst")
         })
     }
 }
@@ -113,6 +117,9 @@ pub struct StageMedians {
     /// A whole frame.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub total_ms: Option<f64>,
+    /// A whole burst with the global search.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub burst_ms: Option<f64>,
 }
 
 /// What `relocd bench --json` prints.
@@ -155,13 +162,18 @@ pub fn run(
     let representation = model.contract().representation;
     let prediction = Prediction::decode(&raw, representation, 0.0)?;
     let burst = vec![prediction.clone(); BURST];
-    let refiner = LineRefiner::new(&FieldModel::new(model.contract().field.clone()));
-    let intrinsics = model.contract().camera;
+    let (intrinsics, model_field) = (model.contract().camera, model.contract().field.clone());
+    let backend = model.backend();
+    let whole = Pipeline::new(model)
+        .with_lines(&FieldModel::new(model_field))
+        .with_global_search(GlobalSearch::Always);
+    let (relocaliser, refiner) = (
+        whole.relocaliser().expect("the pipeline has the network"),
+        whole.refiner().expect("the pipeline checks lines"),
+    );
     let percepts = vec![refiner.percepts(&frame, &intrinsics, &camera_pose)?; line_frames.max(1)];
     let mut heaviest = pipeline::fuse(std::slice::from_ref(&prediction))?.hypotheses;
     heaviest.truncate(1);
-    let backend = model.backend();
-    let relocaliser = Relocaliser::new(model);
 
     let mut medians = StageMedians::default();
     for &stage in stages {
@@ -176,13 +188,19 @@ pub fn run(
                 median_ms(iterations, || drop(refiner.percepts(&frame, &intrinsics, &camera_pose)))
             }
             Stage::Refine => median_ms(iterations, || {
-                let _ =
-                    pipeline::verify(&refiner, &percepts, &mut heaviest.clone(), &[], GlobalSearch::Never);
+                let _ = pipeline::verify(refiner, &percepts, &mut heaviest.clone(), &[], GlobalSearch::Never);
             }),
             Stage::Search => {
-                median_ms(iterations, || drop(pipeline::search_places(&refiner, &percepts, heaviest.first())))
+                median_ms(iterations, || drop(pipeline::search_places(refiner, &percepts, heaviest.first())))
             }
             Stage::Total => median_ms(iterations, || drop(relocaliser.relocalise(&frame, 0.0))),
+            Stage::Burst => median_ms(iterations, || {
+                let mut running = whole.burst();
+                for _ in 0..BURST {
+                    let _ = running.add(&frame, 0.0, Some(&camera_pose));
+                }
+                drop(running.finish(&Priors::default()));
+            }),
         };
         let slot = match stage {
             Stage::Preprocess => &mut medians.preprocess_ms,
@@ -193,6 +211,7 @@ pub fn run(
             Stage::Refine => &mut medians.refine_ms,
             Stage::Search => &mut medians.search_ms,
             Stage::Total => &mut medians.total_ms,
+            Stage::Burst => &mut medians.burst_ms,
         };
         *slot = Some(median);
     }
@@ -273,6 +292,7 @@ impl fmt::Display for BenchReport {
             ("refine (one hypothesis)", self.stages.refine_ms),
             ("search (when unsure)", self.stages.search_ms),
             ("total (one frame)", self.stages.total_ms),
+            ("burst (5, with search)", self.stages.burst_ms),
         ];
         for (name, median) in stages {
             if let Some(median) = median {

@@ -14,6 +14,7 @@ use tracing::info;
 use relocd::bench::Stage;
 use relocd::daemon::config::{Config, Listen, SensorInput, SourceSpec};
 use relocd::daemon::record::RecordOptions;
+use relocd::frame::{Frame, YuyvImage};
 use relocd::geometry::{CameraIntrinsics, CameraPose, FieldDimensions, FieldModel, Representation};
 use relocd::pipeline::priors::simulate::PriorSpec;
 use relocd::pipeline::{GlobalSearch, Pipeline};
@@ -98,10 +99,11 @@ struct BenchArgs {
     #[arg(long, default_value_t = 100, value_parser = clap::value_parser!(u32).range(1..=100_000))]
     iterations: u32,
     /// Time only these stages (repeatable): preprocess, inference, unfold, fusion, lines, refine, search,
-    /// total.
+    /// total, burst.
     #[arg(long)]
     stage: Vec<Stage>,
-    /// Relocalise this image (PNG or JPEG) instead of a rendered 640×480 YUYV frame.
+    /// Relocalise this image (PNG or JPEG) instead of a rendered 640×480 YUYV frame; timed as the
+    /// camera streams it (YUYV) where its width is even.
     #[arg(long)]
     frame: Option<PathBuf>,
     /// Height of the --frame's camera above the ground, metres [default: a standing Nao's, 0.5].
@@ -563,7 +565,12 @@ fn bench(args: BenchArgs) -> anyhow::Result<()> {
                 0.0,
             )
             .context("--camera-height/--camera-pitch/--camera-roll")?;
-            Some((relocd::frame::Frame::Rgb(image.to_rgb8()), camera))
+            let rgb = image.to_rgb8();
+            let frame = match YuyvImage::from_rgb(&rgb) {
+                Ok(yuyv) => Frame::Yuyv(yuyv),
+                Err(_) => Frame::Rgb(rgb),
+            };
+            Some((frame, camera))
         }
         None => None,
     };

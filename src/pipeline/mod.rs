@@ -163,6 +163,11 @@ impl Pipeline {
         self.relocaliser.as_ref()
     }
 
+    /// The field lines' refiner, if bursts are checked against them.
+    pub fn refiner(&self) -> Option<&LineRefiner> {
+        self.refiner.as_ref()
+    }
+
     /// Whether bursts are checked against the field lines.
     pub fn checks_lines(&self) -> bool {
         self.refiner.is_some()

@@ -14,6 +14,7 @@ pub mod optimise;
 pub mod percepts;
 pub mod search;
 
+use std::borrow::Cow;
 use std::sync::OnceLock;
 
 use nalgebra::{Matrix3, Point2, Point3, Vector2, Vector3};
@@ -80,6 +81,13 @@ const SEARCH_CANDIDATES: usize = 10;
 /// Candidates whose points lie farther than this from the lines on average (metres, on the coarse
 /// grid) are not worth a fit.
 const SEARCH_MAX_MEAN_DISTANCE: f64 = 0.12;
+/// Line points one search's fits use in all (candidates times points per fit): where many candidates
+/// pass, each is fitted to fewer points, evenly spread and weighted to stand for the rest, and still
+/// checked against all of them, so a burst of five frames costs about what one frame does. With all
+/// [`SEARCH_CANDIDATES`], 100 points each, as many as the fit's coarse search scores (on tuning
+/// seeds as many poses were found as with every point; BENCHMARKS.md, "A budget for the search's
+/// fits").
+const SEARCH_FIT_POINTS: usize = 1000;
 /// Widest reach of [`LineRefiner::search_near`] around its guess (metres, radians).
 const NEAR_REACH: (f64, f64) = (2.0, 1.0);
 /// Fits closer than this (metres, radians) are one place.
@@ -320,7 +328,7 @@ impl LineRefiner {
             });
             fits.push(match twin {
                 Some(twin) => fits[twin].point_reflected(),
-                None => self.check_one(frames, &observations, guess),
+                None => self.check_one(frames, &observations, &observations, guess),
             });
         }
         LineVerdict::Checked(fits)
@@ -368,7 +376,7 @@ impl LineRefiner {
         let observations: Vec<Observation> =
             located.into_iter().map(|(_, _, observation)| observation).collect();
         let sigma = PoseSigma { x: MIN_PRIOR_SIGMA.0, y: MIN_PRIOR_SIGMA.0, theta: MIN_PRIOR_SIGMA.1 };
-        let fit = self.check_one(frames, &observations, &Guess { pose: *pose, sigma });
+        let fit = self.check_one(frames, &observations, &observations, &Guess { pose: *pose, sigma });
         Some(PoseCheck {
             points: observations.len(),
             inlier_share: 1.0 - off_lines.len() as f64 / observations.len() as f64,
@@ -392,8 +400,10 @@ impl LineRefiner {
         let search = self.search.get_or_init(|| SearchMap::new(&self.field, &self.map));
         let candidates =
             search.candidates(&observations, SEARCH_CANDIDATES, SEARCH_MAX_MEAN_DISTANCE, region);
+        let fit_points = thinned(&observations, SEARCH_FIT_POINTS / candidates.len().max(1));
         for candidate in candidates {
-            let fit = self.check_one(frames, &observations, &Guess { pose: candidate.pose, sigma });
+            let guess = Guess { pose: candidate.pose, sigma };
+            let fit = self.check_one(frames, &observations, &fit_points, &guess);
             if fit.evidence.check == LineCheck::Contradicted
                 || places.iter().any(|place| same_place_or_twin(&place.pose, &fit.pose))
             {
@@ -405,8 +415,15 @@ impl LineRefiner {
         places
     }
 
-    /// Fits and checks one guess.
-    fn check_one(&self, frames: &[FramePercepts], observations: &[Observation], guess: &Guess) -> LineFit {
+    /// Fits one guess to `fit_points` (the burst's `observations`, or an even share of them weighted
+    /// to stand for the rest) and checks the fit against all `observations`.
+    fn check_one(
+        &self,
+        frames: &[FramePercepts],
+        observations: &[Observation],
+        fit_points: &[Observation],
+        guess: &Guess,
+    ) -> LineFit {
         let camera = camera_calibration(frames);
         let prior = Prior {
             pose: guess.pose,
@@ -417,7 +434,7 @@ impl LineRefiner {
             ),
             camera_sigma: camera.sigma,
         };
-        let fitted = fit(&self.map, observations, &prior, self.correct_camera);
+        let fitted = fit(&self.map, fit_points, &prior, self.correct_camera);
         let inlier_share = self.inlier_share(observations, &fitted.pose, &fitted.calibration);
         let unseen_share = self.unseen_share(frames, &fitted.pose, &fitted.calibration);
         let quality = inlier_share * (1.0 - unseen_share.unwrap_or(0.0));
@@ -647,6 +664,21 @@ fn camera_calibration(frames: &[FramePercepts]) -> CameraCalibration {
     }
 }
 
+/// At most `at_most` of `observations` (at least one), evenly spread over them, each weighted to stand
+/// for the ones left out; all of them where there are no more.
+fn thinned(observations: &[Observation], at_most: usize) -> Cow<'_, [Observation]> {
+    if observations.len() <= at_most {
+        return Cow::Borrowed(observations);
+    }
+    let stride = observations.len() as f64 / at_most.max(1) as f64;
+    let kept: Vec<Observation> =
+        (0..at_most.max(1)).map(|k| observations[(k as f64 * stride) as usize]).collect();
+    let scale = observations.len() as f64 / kept.len() as f64;
+    kept.into_iter()
+        .map(|observation| Observation { weight: observation.weight * scale, ..observation })
+        .collect()
+}
+
 /// The line points of all frames as observations with their σ (see [`located_observations`]).
 fn observations(frames: &[FramePercepts]) -> Vec<Observation> {
     located_observations(frames).into_iter().map(|(_, _, observation)| observation).collect()
@@ -786,6 +818,20 @@ mod tests {
                 calibration_rates: [Vector2::zeros(); 2],
             })
             .collect()
+    }
+
+    #[test]
+    fn a_thinned_share_spans_the_points_and_stands_for_all_of_them() {
+        let points = observed((0..400).map(|i| (f64::from(i) * 0.01, 0.0)));
+        assert!(matches!(thinned(&points, 400), Cow::Borrowed(_)));
+        let kept = thinned(&points, 150);
+        assert_eq!(kept.len(), 150);
+        assert_eq!(kept[0].ground, points[0].ground);
+        assert!(kept.last().unwrap().ground.x > 3.9, "{}", kept.last().unwrap().ground.x);
+        assert!(kept.windows(2).all(|pair| pair[1].ground.x > pair[0].ground.x));
+        let weight: f64 = kept.iter().map(|observation| observation.weight).sum();
+        assert!((weight - 400.0).abs() < 1e-9, "{weight}");
+        assert_eq!(thinned(&points, 0).len(), 1);
     }
 
     #[test]
