@@ -667,13 +667,13 @@ fn camera_calibration(frames: &[FramePercepts]) -> CameraCalibration {
 /// At most `at_most` of `observations` (at least one), evenly spread over them, each weighted to stand
 /// for the ones left out; all of them where there are no more.
 fn thinned(observations: &[Observation], at_most: usize) -> Cow<'_, [Observation]> {
+    let at_most = at_most.max(1);
     if observations.len() <= at_most {
         return Cow::Borrowed(observations);
     }
-    let stride = observations.len() as f64 / at_most.max(1) as f64;
-    let kept: Vec<Observation> =
-        (0..at_most.max(1)).map(|k| observations[(k as f64 * stride) as usize]).collect();
-    let scale = observations.len() as f64 / kept.len() as f64;
+    let stride = observations.len() as f64 / at_most as f64;
+    let kept: Vec<Observation> = (0..at_most).map(|k| observations[(k as f64 * stride) as usize]).collect();
+    let scale = observations.len() as f64 / at_most as f64;
     kept.into_iter()
         .map(|observation| Observation { weight: observation.weight * scale, ..observation })
         .collect()
