@@ -217,10 +217,12 @@ impl FramePercepts {
     }
 
     /// Whether a line at `pixel`, `line_width` pixels wide there, would have been searched for: on the
-    /// carpet (below the field border of its column), not hidden by anything standing on it, and far
-    /// enough inside the image for the scan lines to find it. A crossing needs carpet beyond the line
-    /// on its scan line and two neighbouring scan lines to line up with, so a line within half its
-    /// width and [`EDGE_SCAN_LINES`] scan spacings of the image's edge is often not found.
+    /// carpet (below the field border of its column and of the columns a line's width and a scan
+    /// spacing to either side, as a row crossing needs: a line beside a goal post's foot is not
+    /// found), not hidden by anything standing on it, and far enough inside the image for the scan
+    /// lines to find it. A crossing needs carpet beyond the line on its scan line and two
+    /// neighbouring scan lines to line up with, so a line within half its width and
+    /// [`EDGE_SCAN_LINES`] scan spacings of the image's edge is often not found.
     pub fn searched(&self, pixel: &Point2<f64>, line_width: f64) -> bool {
         let (width, height) = self.image.dimensions();
         let spacing = self.image.scan_spacing as f64;
@@ -232,7 +234,12 @@ impl FramePercepts {
         {
             return false;
         }
-        pixel.y > self.image.carpet_top_at(pixel.x) + spacing && !self.image.hidden_at(pixel)
+        let beside = line_width / 2.0 + spacing;
+        let carpet_top = [pixel.x - beside, pixel.x, pixel.x + beside]
+            .into_iter()
+            .map(|u| self.image.carpet_top_at(u.max(0.0)))
+            .fold(f64::NEG_INFINITY, f64::max);
+        pixel.y > carpet_top + spacing && !self.image.hidden_at(pixel)
     }
 }
 
@@ -656,6 +663,22 @@ mod tests {
         assert!(!percepts.searched(&Point2::new(320.0, 2.0), 10.0), "at the image edge");
         assert!(percepts.searched(&Point2::new(30.0, 360.0), 10.0), "a thin line near the edge");
         assert!(!percepts.searched(&Point2::new(30.0, 360.0), 30.0), "a wide line near the edge");
+    }
+
+    #[test]
+    fn a_line_beside_a_post_is_not_expected() {
+        // Carpet to the top of the image, a grey post standing on it from the top down to row 300: a
+        // row crossing needs carpet beyond the line on both sides, so beside the post none is found.
+        let frame = Frame::Rgb(RgbImage::from_fn(640, 480, |x, y| {
+            let post = (300..320).contains(&x) && y < 300;
+            Rgb(if post { [200, 200, 200] } else { [60, 130, 50] })
+        }));
+        let camera = CameraPose::new(0.5, 0.3, 0.0, 0.0).unwrap();
+        let percepts = detect(&frame, &CameraIntrinsics::nao_top(), &camera, 0.05).unwrap();
+        assert!(!percepts.searched(&Point2::new(326.0, 200.0), 6.0), "right beside the post");
+        assert!(!percepts.searched(&Point2::new(292.0, 200.0), 6.0), "on its other side");
+        assert!(percepts.searched(&Point2::new(400.0, 200.0), 6.0), "clear of the post");
+        assert!(percepts.searched(&Point2::new(326.0, 360.0), 6.0), "below its foot");
     }
 
     #[test]
