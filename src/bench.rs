@@ -137,6 +137,9 @@ pub struct BenchReport {
     pub iterations: usize,
     /// The frame timed: format and size.
     pub frame: String,
+    /// Line points found in the frame under its camera pose: with none, the refine and search stages
+    /// have nothing to fit (a frame timed under a camera pose it was not taken from).
+    pub line_points: usize,
     /// Frames of line points the refine and search stages fit.
     pub line_frames: usize,
     /// Per-stage medians.
@@ -224,6 +227,7 @@ pub fn run(
         cpu: cpu_name(),
         iterations,
         frame: format!("{format} {width}x{height}"),
+        line_points: percepts[0].points.len(),
         line_frames: percepts.len(),
         stages: medians,
     })
@@ -276,12 +280,20 @@ impl fmt::Display for BenchReport {
             self.isa
         )?;
         writeln!(formatter, "frame   {}, medians of {} runs, one thread", self.frame, self.iterations)?;
-        if self.line_frames > 1 {
+        if self.line_points == 0 {
             writeln!(
                 formatter,
-                "lines   refine and search fit {} copies of the frame's line points",
-                self.line_frames
+                "lines   none under the frame's camera pose: refine and search have nothing to fit \
+                 (--camera-height/--camera-pitch/--camera-roll give the pose the frame was taken from)"
             )?;
+        } else if self.line_frames > 1 {
+            writeln!(
+                formatter,
+                "lines   {} points; refine and search fit {} copies of the frame's line points",
+                self.line_points, self.line_frames
+            )?;
+        } else {
+            writeln!(formatter, "lines   {} points", self.line_points)?;
         }
         let stages = [
             ("preprocess", self.stages.preprocess_ms),
@@ -331,6 +343,19 @@ mod tests {
         assert!(stages.values().all(|value| value.as_f64().unwrap() >= 0.0));
         assert_eq!(json["isa"], kernel_isa());
         assert_eq!(json["line_frames"], 3);
+        assert!(json["line_points"].as_u64().unwrap() >= 12, "the benchmark frame shows lines: {json}");
         assert!(report.to_string().contains("3 copies of the frame's line points"), "{report}");
+    }
+
+    #[test]
+    fn a_frame_without_lines_under_its_camera_says_so() {
+        let model = crate::relocaliser::default_model().unwrap();
+        let (frame, _) = camera_frame();
+        // The benchmark frame seen from a camera looking up: no line fits that pose.
+        let looking_up = CameraPose::new(0.5, -0.5, 0.0, 0.0).unwrap();
+        let report =
+            run(model, "built-in".into(), Some((frame, looking_up)), &[Stage::Search], 1, 1).unwrap();
+        assert_eq!(report.line_points, 0);
+        assert!(report.to_string().contains("nothing to fit"), "{report}");
     }
 }
