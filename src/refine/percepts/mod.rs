@@ -147,6 +147,13 @@ impl ImagePercepts {
         self.carpet_top[left].max(self.carpet_top[right])
     }
 
+    /// The lower of the carpet's tops a scan spacing beyond either end of a run from column `from` to
+    /// column `to`: a row crossing there is a line only below it, with carpet beyond it on both sides.
+    fn carpet_top_beside(&self, from: f64, to: f64) -> f64 {
+        let spacing = self.scan_spacing as f64;
+        self.carpet_top_at(from - spacing).max(self.carpet_top_at(to + spacing))
+    }
+
     /// Whether the grid sample nearest to `pixel` shows neither carpet nor line.
     fn hidden_at(&self, pixel: &Point2<f64>) -> bool {
         let rows = self.hidden.len() / self.carpet_top.len();
@@ -234,11 +241,11 @@ impl FramePercepts {
         {
             return false;
         }
-        let beside = line_width / 2.0 + spacing;
-        let carpet_top = [pixel.x - beside, pixel.x, pixel.x + beside]
-            .into_iter()
-            .map(|u| self.image.carpet_top_at(u.max(0.0)))
-            .fold(f64::NEG_INFINITY, f64::max);
+        let half_width = line_width / 2.0;
+        let carpet_top = self
+            .image
+            .carpet_top_at(pixel.x)
+            .max(self.image.carpet_top_beside(pixel.x - half_width, pixel.x + half_width));
         pixel.y > carpet_top + spacing && !self.image.hidden_at(pixel)
     }
 }
@@ -390,10 +397,7 @@ pub fn detect_in_image(frame: &Frame) -> Result<ImagePercepts, PerceptError> {
         for crossing in scan::crossings(&line, &green, &palette, max_width) {
             // The carpet on both sides reaches above the crossing (a wide line along a column cuts
             // that column's carpet short, not its neighbours').
-            let spacing = scan_spacing as f64;
-            let top = image
-                .carpet_top_at((crossing.start as f64 - spacing).max(0.0))
-                .max(image.carpet_top_at(crossing.end as f64 + spacing));
+            let top = image.carpet_top_beside(crossing.start as f64, crossing.end as f64);
             if row as f64 + 0.5 > top {
                 found.push((Axis::Horizontal, row, crossing));
             }
