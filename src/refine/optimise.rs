@@ -4,6 +4,8 @@
 //! camera's pitch and roll (a robot's calibration error, which bends every ground point the same way),
 //! held to zero by a prior. The covariance comes from the final normal equations.
 
+use std::ops::AddAssign;
+
 use nalgebra::{Matrix2, Matrix3, Point2, SMatrix, SVector, Vector2, Vector3};
 
 use super::calibration::CameraCalibration;
@@ -151,23 +153,63 @@ fn state_sigma(prior: &Prior) -> State {
 
 /// The cost using the map's cell distances: cheap, for the coarse search (no camera correction). Only
 /// every `stride`-th point is scored, its loss counted `stride` times, so that the lines keep their
-/// weight against the prior.
+/// weight against the prior. `None` as soon as the cost is sure to exceed `limit`: every point's loss
+/// is at least zero, so the cost only grows as points are added.
 fn coarse_cost(
     map: &LineMap,
     observations: &[Observation],
     stride: usize,
     pose: &Vector3<f64>,
     prior: &Prior,
-) -> f64 {
+    limit: Option<f64>,
+) -> Option<f64> {
     let place = to_field(*pose);
-    let lines: f64 = observations
-        .iter()
-        .step_by(stride)
-        .map(|observation| {
-            observation.weight * cauchy(map.distance(place(&observation.ground)) / observation.sigma)
-        })
-        .sum();
-    lines * stride as f64 + prior_loss(prior_residual(pose, prior).norm_squared())
+    let prior_cost = prior_loss(prior_residual(pose, prior).norm_squared());
+    let scale = stride as f64;
+    let mut lines = 0.0;
+    for observation in observations.iter().step_by(stride) {
+        lines += observation.weight * cauchy(map.distance(place(&observation.ground)) / observation.sigma);
+        if limit.is_some_and(|limit| (lines * scale + prior_cost).total_cmp(&limit).is_gt()) {
+            return None;
+        }
+    }
+    Some(lines * scale + prior_cost)
+}
+
+/// The coarse search's [`STARTS`] best poses, best first: of the poses [`SEARCH_STEPS`] steps of
+/// `step` each side of `centre` along every axis, those of least [`coarse_cost`] (ties in the order of
+/// x, then y, then heading offsets). Poses are scored from the centre outwards, so that the best few
+/// are known early and most others are left as soon as they are sure to cost more.
+fn coarse_starts(
+    map: &LineMap,
+    observations: &[Observation],
+    prior: &Prior,
+    centre: &Vector3<f64>,
+    step: &Vector3<f64>,
+) -> Vec<Vector3<f64>> {
+    let stride = observations.len().div_ceil(COARSE_POINTS).max(1);
+    let mut grid: Vec<(usize, [i32; 3])> = Vec::new();
+    for i in -SEARCH_STEPS..=SEARCH_STEPS {
+        for j in -SEARCH_STEPS..=SEARCH_STEPS {
+            for k in -SEARCH_STEPS..=SEARCH_STEPS {
+                grid.push((grid.len(), [i, j, k]));
+            }
+        }
+    }
+    grid.sort_by_key(|(_, offset)| offset.iter().map(|o| o.abs()).sum::<i32>());
+    // The best so far as (cost, grid order, pose), best first.
+    let mut best: Vec<(f64, usize, Vector3<f64>)> = Vec::with_capacity(STARTS + 1);
+    for (order, [i, j, k]) in grid {
+        let pose = centre + Vector3::new(f64::from(i) * step.x, f64::from(j) * step.y, f64::from(k) * step.z);
+        let limit = (best.len() == STARTS).then(|| best[STARTS - 1].0);
+        let Some(cost) = coarse_cost(map, observations, stride, &pose, prior, limit) else { continue };
+        let rank = best.partition_point(|&(known, known_order, _)| {
+            known.total_cmp(&cost).then(known_order.cmp(&order)).is_lt()
+        });
+        best.insert(rank, (cost, order, pose));
+        best.truncate(STARTS);
+    }
+    best.into_iter().map(|(_, _, pose)| pose).collect()
 }
 
 /// Cost, Gauss–Newton normal equations (H, g) and the lines' share of H at a state.
@@ -190,6 +232,9 @@ fn linearise(
     let calibration = state.fixed_rows::<2>(3).into_owned();
     let mut line_information = Matrix5::zeros();
     let mut gradient = State::zeros();
+    // The pose's block of the two, summed apart while the camera is left as it is.
+    let mut pose_information = Matrix3::zeros();
+    let mut pose_gradient = Vector3::zeros();
     let mut cost = 0.0;
     let (sin, cos) = pose.z.sin_cos();
     let rotate = |v: &Vector2<f64>| Vector2::new(cos * v.x - sin * v.y, sin * v.x + cos * v.y);
@@ -203,20 +248,23 @@ fn linearise(
         cost += observation.weight * cauchy_loss(ratio_squared, CAUCHY_SCALE);
         let weight = observation.weight * cauchy_weight(ratio_squared);
         let rotated = rotate(&ground.coords);
-        let [pitch_rate, roll_rate] = match calibrate {
-            true => observation.calibration_rates.each_ref().map(rotate),
-            false => [Vector2::zeros(); 2],
-        };
-        let jacobian = State::new(
-            normal.x,
-            normal.y,
-            normal.x * -rotated.y + normal.y * rotated.x,
-            normal.dot(&pitch_rate),
-            normal.dot(&roll_rate),
-        ) / observation.sigma;
-        line_information += weight * jacobian * jacobian.transpose();
-        gradient += weight * error * jacobian;
+        let turn = normal.x * -rotated.y + normal.y * rotated.x;
+        if calibrate {
+            let [pitch_rate, roll_rate] = observation.calibration_rates.each_ref().map(rotate);
+            let jacobian =
+                State::new(normal.x, normal.y, turn, normal.dot(&pitch_rate), normal.dot(&roll_rate))
+                    / observation.sigma;
+            line_information += weight * jacobian * jacobian.transpose();
+            gradient += weight * error * jacobian;
+        } else {
+            // The camera's rows stay zero: only the pose's block is summed.
+            let jacobian = Vector3::new(normal.x, normal.y, turn) / observation.sigma;
+            pose_information += weight * jacobian * jacobian.transpose();
+            pose_gradient += weight * error * jacobian;
+        }
     }
+    line_information.fixed_view_mut::<3, 3>(0, 0).add_assign(&pose_information);
+    gradient.fixed_rows_mut::<3>(0).add_assign(&pose_gradient);
     let sigma = state_sigma(prior);
     let pose_residual = prior_residual(&pose, prior);
     let pose_squared = pose_residual.norm_squared();
@@ -295,21 +343,9 @@ fn negligible(step: &State) -> bool {
 pub fn fit(map: &LineMap, observations: &[Observation], prior: &Prior, calibrate: bool) -> Fit {
     let centre = Vector3::new(prior.pose.x(), prior.pose.y(), prior.pose.heading());
     let step = prior.sigma * SEARCH_STEP_SIGMAS;
-    let stride = observations.len().div_ceil(COARSE_POINTS).max(1);
-    let mut candidates: Vec<(f64, Vector3<f64>)> = Vec::new();
-    for i in -SEARCH_STEPS..=SEARCH_STEPS {
-        for j in -SEARCH_STEPS..=SEARCH_STEPS {
-            for k in -SEARCH_STEPS..=SEARCH_STEPS {
-                let pose = centre + Vector3::new(i as f64 * step.x, j as f64 * step.y, k as f64 * step.z);
-                candidates.push((coarse_cost(map, observations, stride, &pose, prior), pose));
-            }
-        }
-    }
-    candidates.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let (state, linearised) = candidates
-        .iter()
-        .take(STARTS)
-        .map(|(_, start)| {
+    let (state, linearised) = coarse_starts(map, observations, prior, &centre, &step)
+        .into_iter()
+        .map(|start| {
             let start = State::new(start.x, start.y, start.z, 0.0, 0.0);
             levenberg_marquardt(map, observations, start, prior, false, MAX_ITERATIONS)
         })
@@ -403,6 +439,42 @@ mod tests {
         observe_lines(field, truth, |ground| {
             ground.x > 0.2 && ground.coords.norm() < range && ground.y.abs() < ground.x
         })
+    }
+
+    #[test]
+    fn the_coarse_starts_are_the_grid_s_least_costly_poses_in_grid_order() {
+        let field = FieldModel::default();
+        let map = LineMap::new(&field);
+        let truth = FieldPose::new(-3.5, -1.5, -2.4).unwrap();
+        let observations = observe(&field, &truth, 3.0);
+        let prior = Prior {
+            pose: FieldPose::new(-3.2, -1.8, -2.2).unwrap(),
+            sigma: Vector3::new(0.4, 0.4, 0.2),
+            camera_sigma: Vector2::repeat(0.02),
+        };
+        let centre = Vector3::new(prior.pose.x(), prior.pose.y(), prior.pose.heading());
+        let step = prior.sigma * SEARCH_STEP_SIGMAS;
+        // Every grid pose scored in full, in grid order, sorted stably by cost.
+        let mut all = Vec::new();
+        for i in -SEARCH_STEPS..=SEARCH_STEPS {
+            for j in -SEARCH_STEPS..=SEARCH_STEPS {
+                for k in -SEARCH_STEPS..=SEARCH_STEPS {
+                    let pose = centre
+                        + Vector3::new(f64::from(i) * step.x, f64::from(j) * step.y, f64::from(k) * step.z);
+                    let cost = coarse_cost(&map, &observations, 1, &pose, &prior, None).unwrap();
+                    all.push((cost, pose));
+                }
+            }
+        }
+        all.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let expected: Vec<Vector3<f64>> = all.iter().take(STARTS).map(|&(_, pose)| pose).collect();
+        assert_eq!(coarse_starts(&map, &observations, &prior, &centre, &step), expected);
+        // A pose's cost is left once it is sure to exceed the limit, and kept while it may not.
+        let (best, _) = all[0];
+        assert_eq!(coarse_cost(&map, &observations, 1, &expected[0], &prior, Some(best)), Some(best));
+        let (worst, pose) = all[all.len() - 1];
+        assert_eq!(coarse_cost(&map, &observations, 1, &pose, &prior, Some(best)), None);
+        assert!(worst > best);
     }
 
     #[test]

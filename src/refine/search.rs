@@ -33,6 +33,8 @@ pub const REACH: f64 = 5.0;
 const MAX_POINTS: usize = 64;
 /// Every this many points is a probe, scored first at every pose.
 const PROBE_STRIDE: usize = 4;
+/// A pose's running sum is compared with its limit after every this many points.
+const CHECK_EVERY: usize = 4;
 /// A pose is left unscored when its probes lie farther from the lines on average than this many
 /// times the largest mean distance a candidate may have.
 const PROBE_MARGIN: f64 = 1.5;
@@ -126,6 +128,9 @@ impl SearchMap {
             .collect();
         let probe_limit =
             (PROBE_MARGIN * max_mean_distance.min(TRUNCATION) / TRUNCATION * 255.0 * probes as f64) as u32;
+        // A pose that scores more is never a candidate, and no neighbour of it is kept from being one
+        // by it: it is left as soon as its sum is sure to exceed this.
+        let Some(score_limit) = score_limit(points.len(), max_mean_distance) else { return Vec::new() };
         let (width, height) = (self.positions.0 as usize, self.positions.1 as usize);
         let layer = width * height;
         let mut scores = vec![u32::MAX; HEADINGS * layer];
@@ -147,19 +152,19 @@ impl SearchMap {
                 {
                     let cell_x = self.first.0 as usize + column * POSITION_STEP as usize;
                     let base = (cell_y * self.columns + cell_x) as isize;
-                    // Every offset stays within the padding, so the index is in the map.
-                    let sum = |offsets: &[isize]| -> u32 {
-                        offsets.iter().map(|offset| u32::from(self.cells[(base + offset) as usize])).sum()
-                    };
-                    let probed = sum(probe_offsets);
-                    *score = if probed > probe_limit { u32::MAX } else { probed + sum(rest_offsets) };
+                    *score = self
+                        .sum_within(base, probe_offsets, 0, probe_limit)
+                        .and_then(|probed| self.sum_within(base, rest_offsets, probed, score_limit))
+                        .unwrap_or(u32::MAX);
                 }
             }
         }
-        let mut minima: Vec<(u32, usize)> = (0..scores.len())
-            .filter(|&index| scores[index] != u32::MAX && is_local_minimum(&scores, index, width, height))
-            .map(|index| (scores[index], index))
-            .collect();
+        let mut minima: Vec<(u32, usize)> = Vec::new();
+        for (index, &score) in scores.iter().enumerate() {
+            if score != u32::MAX && is_local_minimum(&scores, index, width, height) {
+                minima.push((score, index));
+            }
+        }
         minima.sort_unstable();
         minima
             .into_iter()
@@ -172,11 +177,24 @@ impl SearchMap {
                 let y = self.origin.y + f64::from(cell(self.first.1, row)) * CELL;
                 Candidate {
                     pose: FieldPose::new(x, y, heading(heading_index)).expect("grid poses are finite"),
-                    mean_distance: f64::from(score) / points.len() as f64 / 255.0 * TRUNCATION,
+                    mean_distance: mean_distance(score, points.len()),
                 }
             })
-            .take_while(|candidate| candidate.mean_distance <= max_mean_distance)
             .collect()
+    }
+
+    /// `start` plus the map's cells at `base + offsets`, or `None` once that exceeds `limit` (looked
+    /// at every [`CHECK_EVERY`] points). Every offset stays within the padding, so every index is in
+    /// the map.
+    fn sum_within(&self, base: isize, offsets: &[isize], start: u32, limit: u32) -> Option<u32> {
+        let mut sum = start;
+        for chunk in offsets.chunks(CHECK_EVERY) {
+            sum += chunk.iter().map(|offset| u32::from(self.cells[(base + offset) as usize])).sum::<u32>();
+            if sum > limit {
+                return None;
+            }
+        }
+        Some(sum)
     }
 
     /// The grid rows and columns to score at `heading_index`: all of them without a region; with one,
@@ -209,6 +227,29 @@ pub fn grid_spacing() -> (f64, f64) {
 
 fn heading(index: usize) -> f64 {
     index as f64 * std::f64::consts::PI / HEADINGS as f64
+}
+
+/// The mean truncated distance (metres) of `points` points that score `score` in all.
+fn mean_distance(score: u32, points: usize) -> f64 {
+    f64::from(score) / points as f64 / 255.0 * TRUNCATION
+}
+
+/// The largest score of `points` points whose [`mean_distance`] is at most `max_mean_distance`
+/// (`None`: not even a perfect score's is).
+fn score_limit(points: usize, max_mean_distance: f64) -> Option<u32> {
+    let passes = |score: u32| mean_distance(score, points) <= max_mean_distance;
+    let most = 255 * u32::try_from(points).unwrap_or(u32::MAX / 255).min(u32::MAX / 255);
+    let estimate =
+        (max_mean_distance / TRUNCATION * 255.0 * points as f64).clamp(0.0, f64::from(most)) as u32;
+    // The estimate is within rounding of the limit: step to it exactly.
+    let mut limit = estimate;
+    while limit < most && passes(limit + 1) {
+        limit += 1;
+    }
+    while !passes(limit) {
+        limit = limit.checked_sub(1)?;
+    }
+    Some(limit)
 }
 
 /// At most [`MAX_POINTS`] of the points within reach, evenly spread over their order.
@@ -330,6 +371,31 @@ mod tests {
             calibration_rates: [nalgebra::Vector2::zeros(); 2],
         }];
         assert!(search.candidates(&far, 10, 0.12, None).is_empty(), "points beyond reach are left out");
+    }
+
+    #[test]
+    fn the_score_limit_is_the_largest_score_a_candidate_may_have() {
+        for points in [1, 13, 64] {
+            for max_mean_distance in [0.0, 0.05, 0.12, 0.2999, 0.3, 1.0] {
+                let limit = score_limit(points, max_mean_distance).expect("a perfect score passes");
+                assert!(mean_distance(limit, points) <= max_mean_distance);
+                let most = 255 * points as u32;
+                assert!(limit == most || mean_distance(limit + 1, points) > max_mean_distance);
+            }
+        }
+        assert_eq!(score_limit(64, -0.01), None);
+        assert_eq!(score_limit(64, f64::NAN), None);
+    }
+
+    #[test]
+    fn a_sum_is_left_once_it_exceeds_its_limit() {
+        let field = FieldModel::default();
+        let search = SearchMap::new(&field, &LineMap::new(&field));
+        // Far from every line (beyond the carpet): every cell reads the truncation, 255.
+        let base = (search.columns * (search.first.1 as usize) + 2) as isize;
+        let offsets = [0isize; 8];
+        assert_eq!(search.sum_within(base, &offsets, 10, 10 + 8 * 255), Some(10 + 8 * 255));
+        assert_eq!(search.sum_within(base, &offsets, 10, 10 + 8 * 255 - 1), None);
     }
 
     #[test]
