@@ -176,6 +176,13 @@ fn coarse_cost(
     Some(lines * scale + prior_cost)
 }
 
+/// The coarse search's offsets in steps, [`SEARCH_STEPS`] each side along every axis, in grid order
+/// (x, then y, then heading).
+fn coarse_offsets() -> impl Iterator<Item = Vector3<f64>> {
+    let steps = || (-SEARCH_STEPS..=SEARCH_STEPS).map(f64::from);
+    steps().flat_map(move |i| steps().flat_map(move |j| steps().map(move |k| Vector3::new(i, j, k))))
+}
+
 /// The coarse search's [`STARTS`] best poses, best first: of the poses [`SEARCH_STEPS`] steps of
 /// `step` each side of `centre` along every axis, those of least [`coarse_cost`] (ties in the order of
 /// x, then y, then heading offsets). Poses are scored from the centre outwards, so that the best few
@@ -188,19 +195,12 @@ fn coarse_starts(
     step: &Vector3<f64>,
 ) -> Vec<Vector3<f64>> {
     let stride = observations.len().div_ceil(COARSE_POINTS).max(1);
-    let mut grid: Vec<(usize, [i32; 3])> = Vec::new();
-    for i in -SEARCH_STEPS..=SEARCH_STEPS {
-        for j in -SEARCH_STEPS..=SEARCH_STEPS {
-            for k in -SEARCH_STEPS..=SEARCH_STEPS {
-                grid.push((grid.len(), [i, j, k]));
-            }
-        }
-    }
-    grid.sort_by_key(|(_, offset)| offset.iter().map(|o| o.abs()).sum::<i32>());
+    let mut grid: Vec<(usize, Vector3<f64>)> = coarse_offsets().enumerate().collect();
+    grid.sort_by_key(|(_, offset)| offset.abs().sum() as i32);
     // The best so far as (cost, grid order, pose), best first.
     let mut best: Vec<(f64, usize, Vector3<f64>)> = Vec::with_capacity(STARTS + 1);
-    for (order, [i, j, k]) in grid {
-        let pose = centre + Vector3::new(f64::from(i) * step.x, f64::from(j) * step.y, f64::from(k) * step.z);
+    for (order, offset) in grid {
+        let pose = centre + offset.component_mul(step);
         let limit = (best.len() == STARTS).then(|| best[STARTS - 1].0);
         let Some(cost) = coarse_cost(map, observations, stride, &pose, prior, limit) else { continue };
         let rank = best.partition_point(|&(known, known_order, _)| {
@@ -455,17 +455,13 @@ mod tests {
         let centre = Vector3::new(prior.pose.x(), prior.pose.y(), prior.pose.heading());
         let step = prior.sigma * SEARCH_STEP_SIGMAS;
         // Every grid pose scored in full, in grid order, sorted stably by cost.
-        let mut all = Vec::new();
-        for i in -SEARCH_STEPS..=SEARCH_STEPS {
-            for j in -SEARCH_STEPS..=SEARCH_STEPS {
-                for k in -SEARCH_STEPS..=SEARCH_STEPS {
-                    let pose = centre
-                        + Vector3::new(f64::from(i) * step.x, f64::from(j) * step.y, f64::from(k) * step.z);
-                    let cost = coarse_cost(&map, &observations, 1, &pose, &prior, None).unwrap();
-                    all.push((cost, pose));
-                }
-            }
-        }
+        let mut all: Vec<(f64, Vector3<f64>)> = coarse_offsets()
+            .map(|offset| {
+                let pose = centre + offset.component_mul(&step);
+                (coarse_cost(&map, &observations, 1, &pose, &prior, None).unwrap(), pose)
+            })
+            .collect();
+        assert_eq!(all.len(), 125);
         all.sort_by(|a, b| a.0.total_cmp(&b.0));
         let expected: Vec<Vector3<f64>> = all.iter().take(STARTS).map(|&(_, pose)| pose).collect();
         assert_eq!(coarse_starts(&map, &observations, &prior, &centre, &step), expected);

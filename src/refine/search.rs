@@ -234,11 +234,11 @@ fn mean_distance(score: u32, points: usize) -> f64 {
     f64::from(score) / points as f64 / 255.0 * TRUNCATION
 }
 
-/// The largest score of `points` points whose [`mean_distance`] is at most `max_mean_distance`
-/// (`None`: not even a perfect score's is).
+/// The largest score of `points` (at most [`MAX_POINTS`]) points whose [`mean_distance`] is at most
+/// `max_mean_distance` (`None`: not even a perfect score's is).
 fn score_limit(points: usize, max_mean_distance: f64) -> Option<u32> {
     let passes = |score: u32| mean_distance(score, points) <= max_mean_distance;
-    let most = 255 * u32::try_from(points).unwrap_or(u32::MAX / 255).min(u32::MAX / 255);
+    let most = 255 * points.min(MAX_POINTS) as u32;
     let estimate =
         (max_mean_distance / TRUNCATION * 255.0 * points as f64).clamp(0.0, f64::from(most)) as u32;
     // The estimate is within rounding of the limit: step to it exactly.
