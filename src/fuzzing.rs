@@ -66,7 +66,7 @@ pub fn control(bytes: &[u8]) {
 }
 
 /// A forwarded frame, header then payload: a parsed header round-trips, its payload size is exactly
-/// what makes a YUYV image of its size, and line points found in it are finite.
+/// what makes a YUYV image of its size, line points found in it are finite and goal posts inside it.
 pub fn frame(bytes: &[u8]) {
     let Some((header, payload)) = bytes.split_first_chunk::<HEADER_SIZE>() else { return };
     if let Ok(parsed) = FrameHeader::parse(header) {
@@ -77,10 +77,20 @@ pub fn frame(bytes: &[u8]) {
         // Whatever the pixels, line points are finite and on the ground in front of the camera.
         if let Ok(image) = image {
             let camera = parsed.camera.unwrap_or_default();
-            let found = detect(&Frame::Yuyv(image), &CameraIntrinsics::nao_top(), &camera, 0.05)
+            let frame = Frame::Yuyv(image);
+            let found = detect(&frame, &CameraIntrinsics::nao_top(), &camera, 0.05)
                 .expect("a valid frame can be searched");
-            for point in found.points {
+            for point in &found.points {
                 assert!(point.ground.x.is_finite() && point.ground.y.is_finite(), "{point:?}");
+            }
+            // Goal posts lie inside the frame.
+            let (width, height) = frame.dimensions();
+            for post in found.image().goal_posts(&frame) {
+                let foot = post.foot;
+                assert!(
+                    foot.x >= 0.0 && foot.x <= f64::from(width) && foot.y <= f64::from(height),
+                    "{post:?}"
+                );
             }
         }
     }

@@ -3,7 +3,8 @@
 //!
 //! Each frame is searched as line refinement searches it ([`crate::refine::detect`]): the carpet's top
 //! edge, the line crossings in the image, and the line points that survive the ground-width gate under
-//! the frame's camera pose. With no pose at all (`camera: None`) only the image stage runs.
+//! the frame's camera pose; and the goal posts standing on the carpet (image space only). With no pose
+//! at all (`camera: None`) only the image stage runs.
 
 use std::fs;
 use std::path::{Path, PathBuf};
@@ -17,7 +18,9 @@ use crate::frame::Frame;
 use crate::geometry::{Camera, CameraIntrinsics, CameraPose, FieldModel, FieldPose};
 use crate::recording::{INDEX_FILE, Recording, RecordingError};
 use crate::refine::line_map::field_primitives;
-use crate::refine::{ImagePercepts, LineRefiner, PerceptError, PoseCheck, detect, detect_in_image};
+use crate::refine::{
+    ImagePercepts, LineRefiner, PerceptError, PoseCheck, PostSighting, detect, detect_in_image,
+};
 
 /// Spacing of the field-line samples drawn under the true pose, metres.
 const FIELD_SAMPLE_SPACING: f64 = 0.02;
@@ -99,6 +102,9 @@ pub struct Inspection {
     pub crossings: usize,
     /// The line points, `[u, v]` pixel centres of the crossings kept (all crossings without a camera).
     pub line_points: Vec<[f64; 2]>,
+    /// The goal posts standing on the carpet, `[u, v, width]`: the centre of each post's foot and its
+    /// width there, pixels.
+    pub goal_posts: Vec<[f64; 3]>,
     /// The same points on the ground in the robot frame, `[x, y]` metres (x forward, y left); absent
     /// without a camera.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -210,12 +216,15 @@ fn inspect_frame(
             (image, pixels, None, None)
         }
     };
+    let posts = image.goal_posts(frame);
     if let Some(out) = &options.out {
         let name =
             file.file_name().map_or_else(|| "frame".into(), |name| name.to_string_lossy().into_owned());
         let path = out.join(format!("{name}.inspect.png"));
         let truth = truth.map(|(pose, camera, _)| (pose, camera));
-        let overlay = draw_overlay(frame, &image, &points, truth, at_truth.as_ref(), field_lines, options);
+        let mut overlay =
+            draw_overlay(frame, &image, &points, truth, at_truth.as_ref(), field_lines, options);
+        draw_posts(&mut overlay, &posts);
         overlay.save(&path).map_err(|error| InspectError::Overlay { path, reason: error.to_string() })?;
     }
     let round = |value: f64| rounded(value, 2);
@@ -232,10 +241,36 @@ fn inspect_frame(
         carpet_edge: image.carpet_edge().map(|(u, v)| [round(u), round(v)]).collect(),
         crossings: image.crossings.len(),
         line_points: points.iter().map(|point| [round(point.x), round(point.y)]).collect(),
+        goal_posts: posts
+            .iter()
+            .map(|post| [round(post.foot.x), round(post.foot.y), round(post.width)])
+            .collect(),
         ground_points: ground
             .map(|ground| ground.iter().map(|[x, y]| [rounded(*x, 3), rounded(*y, 3)]).collect()),
         at_truth: at_truth.as_ref().map(TruthInspection::new),
     })
+}
+
+/// Frames each goal post in green from its top to its foot, with a tick at the foot.
+fn draw_posts(canvas: &mut RgbImage, posts: &[PostSighting]) {
+    let (width, height) = canvas.dimensions();
+    let mut put = |x: f64, y: f64| {
+        if x >= 0.0 && y >= 0.0 && (x as u32) < width && (y as u32) < height {
+            canvas.put_pixel(x as u32, y as u32, Rgb([0, 255, 60]));
+        }
+    };
+    for post in posts {
+        let half = post.width / 2.0 + 1.0;
+        let mut v = post.top;
+        while v <= post.foot.y {
+            put(post.foot.x - half, v);
+            put(post.foot.x + half, v);
+            v += 1.0;
+        }
+        for d in -4..=4 {
+            put(post.foot.x + f64::from(d), post.foot.y);
+        }
+    }
 }
 
 /// `value` rounded to `decimals` decimal places, for printing.

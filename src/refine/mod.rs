@@ -23,7 +23,8 @@ pub use calibration::{CalibrationTracker, CameraCalibration, CameraMeasurement};
 pub use line_map::LineMap;
 use line_map::Primitive;
 pub use percepts::{
-    FramePercepts, ImagePercepts, LineCrossing, LinePoint, PerceptError, detect, detect_in_image,
+    FramePercepts, ImagePercepts, LineCrossing, LinePoint, PerceptError, PostSighting, detect,
+    detect_in_image,
 };
 
 use crate::frame::Frame;

@@ -22,6 +22,7 @@
 
 mod chains;
 mod palette;
+mod posts;
 mod scan;
 
 use nalgebra::{Point2, Vector2};
@@ -31,6 +32,7 @@ use super::calibration::CameraCalibration;
 use crate::frame::{Frame, rgb_to_yuv};
 use crate::geometry::{Camera, CameraIntrinsics, CameraPose, FieldPose};
 use palette::{Palette, Yuv};
+pub use posts::PostSighting;
 use scan::Crossing;
 
 /// Scan lines per image width (and the same spacing vertically).
@@ -118,6 +120,8 @@ pub struct ImagePercepts {
     hidden: Vec<bool>,
     /// The line crossings found on the carpet, vertical scan lines first.
     pub crossings: Vec<LineCrossing>,
+    /// The carpet's colours; `None` where the frame has no carpet.
+    palette: Option<Palette>,
 }
 
 impl ImagePercepts {
@@ -152,6 +156,19 @@ impl ImagePercepts {
     fn carpet_top_beside(&self, from: f64, to: f64) -> f64 {
         let spacing = self.scan_spacing as f64;
         self.carpet_top_at(from - spacing).max(self.carpet_top_at(to + spacing))
+    }
+
+    /// The goal posts standing on this carpet in `frame` (the frame these percepts were found in):
+    /// upright bright bars from the carpet up past the field's border. The pipeline
+    /// does not use them yet; `relocd inspect` shows them.
+    pub fn goal_posts(&self, frame: &Frame) -> Vec<PostSighting> {
+        let (width, height) = frame.dimensions();
+        let Some(palette) = self.palette.filter(|_| (width, height) == (self.width, self.height)) else {
+            return Vec::new();
+        };
+        let pixels = Pixels { frame, width: width as usize };
+        let size = (width as usize, height as usize);
+        posts::find(&pixels, &palette, size, self.scan_spacing, |u| self.carpet_top_at(u))
     }
 
     /// Whether the grid sample nearest to `pixel` shows neither carpet nor line.
@@ -353,6 +370,7 @@ pub fn detect_in_image(frame: &Frame) -> Result<ImagePercepts, PerceptError> {
             carpet_top: vec![height as f64],
             hidden: Vec::new(),
             crossings: Vec::new(),
+            palette: None,
         });
     };
     let max_width = ((MAX_CROSSING_SHARE * width as f64) as usize).max(1);
@@ -366,6 +384,7 @@ pub fn detect_in_image(frame: &Frame) -> Result<ImagePercepts, PerceptError> {
         carpet_top: Vec::with_capacity(columns.len()),
         hidden: Vec::with_capacity(columns.len() * rows.len()),
         crossings: Vec::new(),
+        palette: Some(palette),
     };
     let mut line: Vec<Yuv> = Vec::with_capacity(width_px.max(height_px));
     let mut green: Vec<bool> = Vec::with_capacity(width_px.max(height_px));

@@ -1,0 +1,90 @@
+//! Goal posts found in rendered frames, against the posts projected under the true pose.
+//!
+//! `RELOCD_POST_FRAMES=N RELOCD_POST_SEED=S [RELOCD_POST_REALISM=1] cargo test --release --test posts
+//! -- --nocapture` measures N frames of seed S and prints the figures (BENCHMARKS.md, "Goal posts").
+
+use nalgebra::{Point2, Point3};
+use relocd::frame::Frame;
+use relocd::geometry::{Camera, CameraIntrinsics, FieldModel};
+use relocd::refine::detect_in_image;
+use relocd::sim::{Randomisation, render};
+
+/// Seed of the frames rendered here by default: never used for training or tuning.
+const SEED: u64 = 7120;
+/// Frames measured by default.
+const FRAMES: u64 = 40;
+
+/// Where a post should be seen: its foot's centre and its width, pixels.
+struct Expected {
+    foot: Point2<f64>,
+    width: f64,
+}
+
+/// The posts whose foot and a stretch above it project into the image, clear of its side edges.
+fn expected_posts(field: &FieldModel, camera: &Camera) -> Vec<Expected> {
+    let (width, height) = (f64::from(camera.intrinsics().width), f64::from(camera.intrinsics().height));
+    field
+        .goals
+        .iter()
+        .flat_map(|goal| goal.posts.iter().map(move |post| (goal, post)))
+        .filter_map(|(goal, post)| {
+            let foot = camera.project(&Point3::new(post.x, post.y, 0.0))?;
+            let above = camera.project(&Point3::new(post.x, post.y, goal.height / 2.0))?;
+            let distance = (camera.position().xy() - Point3::new(post.x, post.y, 0.0).xy()).norm();
+            let post_width = 2.0 * goal.post_radius * camera.intrinsics().focal_lengths().0 / distance;
+            let inside = |pixel: Point2<f64>| {
+                pixel.x >= post_width + 3.0 && pixel.x <= width - post_width - 3.0 && pixel.y >= 0.0
+            };
+            (inside(foot) && inside(above) && foot.y < height).then_some(Expected { foot, width: post_width })
+        })
+        .collect()
+}
+
+/// Whether a post found at `foot`, `width` wide, is the expected one.
+fn matches(expected: &Expected, foot: &Point2<f64>) -> bool {
+    (expected.foot.x - foot.x).abs() <= (expected.width / 2.0).max(3.0)
+        && (expected.foot.y - foot.y).abs() <= expected.width + 6.0
+}
+
+/// (posts found, of them right, posts expected, of them found) over `frames` frames of `seed`.
+fn measure(seed: u64, frames: u64, hall_realism: bool) -> (usize, usize, usize, usize) {
+    let field = FieldModel::default();
+    let randomisation = Randomisation { hall_realism, ..Randomisation::default() };
+    let (mut found, mut right, mut expected_count, mut recalled) = (0, 0, 0, 0);
+    for index in 0..frames {
+        let sampled = randomisation.sample(&field, seed, index, 2);
+        let camera = Camera::new(CameraIntrinsics::nao_top(), &sampled.pose, &sampled.camera);
+        let frame = Frame::Rgb(render(&sampled.scene, &camera, &sampled.settings));
+        let posts = detect_in_image(&frame).unwrap().goal_posts(&frame);
+        let expected = expected_posts(&field, &camera);
+        found += posts.len();
+        right += posts.iter().filter(|post| expected.iter().any(|e| matches(e, &post.foot))).count();
+        expected_count += expected.len();
+        recalled += expected.iter().filter(|e| posts.iter().any(|post| matches(e, &post.foot))).count();
+        if std::env::var_os("RELOCD_POST_VERBOSE").is_some() {
+            let feet: Vec<_> = posts.iter().map(|post| (post.foot.x.round(), post.foot.y.round())).collect();
+            let truth: Vec<_> = expected.iter().map(|e| (e.foot.x.round(), e.foot.y.round())).collect();
+            println!("frame {index}: found {feet:?}, expected {truth:?}");
+        }
+    }
+    (found, right, expected_count, recalled)
+}
+
+#[test]
+fn goal_posts_are_found_where_they_stand() {
+    let frames = std::env::var("RELOCD_POST_FRAMES").ok().and_then(|n| n.parse().ok()).unwrap_or(FRAMES);
+    let seed = std::env::var("RELOCD_POST_SEED").ok().and_then(|n| n.parse().ok()).unwrap_or(SEED);
+    let realism = std::env::var_os("RELOCD_POST_REALISM").is_some();
+    let (found, right, expected, recalled) = measure(seed, frames, realism);
+    let share = |part: usize, whole: usize| part as f64 / whole.max(1) as f64;
+    println!(
+        "seed {seed}, {frames} frames{}: {found} posts found, {right} right ({:.1}%); {expected} in view, \
+         {recalled} found ({:.1}%)",
+        if realism { " (hall realism)" } else { "" },
+        100.0 * share(right, found),
+        100.0 * share(recalled, expected)
+    );
+    assert!(expected >= 10, "too few posts in view to measure ({expected})");
+    assert!(share(right, found) >= 0.9, "{right} of {found} posts right");
+    assert!(share(recalled, expected) >= 0.5, "{recalled} of {expected} posts in view found");
+}
