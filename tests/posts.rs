@@ -6,7 +6,7 @@
 use nalgebra::{Point2, Point3};
 use relocd::frame::Frame;
 use relocd::geometry::{Camera, CameraIntrinsics, FieldModel};
-use relocd::refine::detect_in_image;
+use relocd::refine::{detect, detect_in_image};
 use relocd::sim::{Randomisation, render};
 
 /// Seed of the frames rendered here by default: never used for training or tuning.
@@ -87,4 +87,38 @@ fn goal_posts_are_found_where_they_stand() {
     assert!(expected >= 10, "too few posts in view to measure ({expected})");
     assert!(share(right, found) >= 0.9, "{right} of {found} posts right");
     assert!(share(recalled, expected) >= 0.5, "{recalled} of {expected} posts in view found");
+}
+
+#[test]
+fn a_post_s_bearing_on_the_ground_is_the_true_post_s() {
+    // The bearings the line fit uses: each post found, put on the ground under the frame's camera,
+    // points at a field post under the true pose (within its own width and a pixel or two).
+    let field = FieldModel::default();
+    let randomisation = Randomisation::default();
+    let (mut posts, mut right) = (0, 0);
+    for index in 0..FRAMES {
+        let sampled = randomisation.sample(&field, SEED, index, 2);
+        let intrinsics = CameraIntrinsics::nao_top();
+        let camera = Camera::new(intrinsics, &sampled.pose, &sampled.camera);
+        let frame = Frame::Rgb(render(&sampled.scene, &camera, &sampled.settings));
+        let percepts = detect(&frame, &intrinsics, &sampled.camera, field.dimensions().line_width).unwrap();
+        for post in &percepts.posts {
+            posts += 1;
+            let nearest = field
+                .goals
+                .iter()
+                .flat_map(|goal| goal.posts)
+                .map(|true_post| {
+                    let seen = sampled.pose.field_to_robot(true_post);
+                    let difference = seen.y.atan2(seen.x) - post.bearing();
+                    difference.sin().atan2(difference.cos()).abs()
+                })
+                .fold(f64::INFINITY, f64::min);
+            if nearest < 1.0_f64.to_radians() {
+                right += 1;
+            }
+        }
+    }
+    assert!(posts >= 10, "too few posts found to measure ({posts})");
+    assert!(right as f64 >= 0.9 * posts as f64, "{right} of {posts} bearings within 1°");
 }

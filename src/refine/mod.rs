@@ -23,14 +23,14 @@ pub use calibration::{CalibrationTracker, CameraCalibration, CameraMeasurement};
 pub use line_map::LineMap;
 use line_map::Primitive;
 pub use percepts::{
-    FramePercepts, ImagePercepts, LineCrossing, LinePoint, PerceptError, PostSighting, detect,
+    FramePercepts, ImagePercepts, LineCrossing, LinePoint, PerceptError, PostPoint, PostSighting, detect,
     detect_in_image,
 };
 
 use crate::frame::Frame;
 use crate::geometry::angle::angle_distance;
 use crate::geometry::{Camera, CameraIntrinsics, CameraPose, FieldModel, FieldPose, PoseSigma, Symmetry};
-use optimise::{Observation, Prior, fit};
+use optimise::{Observation, PostBearings, Prior, fit};
 use search::{Region, SearchMap};
 
 /// Fewest line points a burst needs for refinement.
@@ -253,6 +253,8 @@ pub struct LineRefiner {
     line_width: f64,
     /// Samples along every painted line, field frame.
     line_samples: Vec<Point2<f64>>,
+    /// The goal posts' centres, field frame.
+    posts: Vec<Point2<f64>>,
 }
 
 impl LineRefiner {
@@ -279,6 +281,7 @@ impl LineRefiner {
             correct_camera: true,
             line_width: field.dimensions().line_width,
             line_samples,
+            posts: field.goals.iter().flat_map(|goal| goal.posts).collect(),
         }
     }
 
@@ -435,7 +438,10 @@ impl LineRefiner {
             ),
             camera_sigma: camera.sigma,
         };
-        let fitted = fit(&self.map, fit_points, &prior, self.correct_camera);
+        let seen: Vec<f64> =
+            frames.iter().flat_map(|frame| frame.posts.iter().map(PostPoint::bearing)).collect();
+        let posts = PostBearings { field: &self.posts, seen: &seen };
+        let fitted = fit(&self.map, fit_points, &posts, &prior, self.correct_camera);
         let inlier_share = self.inlier_share(observations, &fitted.pose, &fitted.calibration);
         let unseen_share = self.unseen_share(frames, &fitted.pose, &fitted.calibration);
         let quality = inlier_share * (1.0 - unseen_share.unwrap_or(0.0));

@@ -2,7 +2,9 @@
 //! Levenberg–Marquardt on point-to-line distances with a Cauchy loss and the starting pose as a
 //! prior (Gaussian near it, Cauchy far from it). The fit also estimates a small correction of the
 //! camera's pitch and roll (a robot's calibration error, which bends every ground point the same way),
-//! held to zero by a prior. The covariance comes from the final normal equations.
+//! held to zero by a prior. Goal posts seen in the image add their bearings (the foot's column is
+//! sharp where its row is not), each to the field post nearest in bearing: they place the robot along
+//! the lines it sees. The covariance comes from the final normal equations.
 
 use std::ops::AddAssign;
 
@@ -49,6 +51,13 @@ const CORRECTABLE_SHARE: f64 = 0.5;
 /// See [`CORRECTABLE_SHARE`], metres.
 const CORRECTABLE_DISTANCE: f64 = 0.15;
 
+/// Standard deviation of a goal post's bearing, radians: a pixel or two of its foot's column, the
+/// camera's roll and the post's round face.
+const POST_BEARING_SIGMA: f64 = 0.5 * std::f64::consts::PI / 180.0;
+/// A field post nearer the robot than this (metres) is not matched to a bearing: its bearing swings
+/// with every centimetre of position.
+const MIN_POST_DISTANCE: f64 = 0.3;
+
 /// (x, y, heading, pitch correction, roll correction).
 type State = SVector<f64, 5>;
 type Matrix5 = SMatrix<f64, 5, 5>;
@@ -71,6 +80,41 @@ impl Observation {
     /// The ground position with a camera correction of (pitch, roll) radians.
     pub fn corrected(&self, calibration: &Vector2<f64>) -> Point2<f64> {
         self.ground + self.calibration_rates[0] * calibration.x + self.calibration_rates[1] * calibration.y
+    }
+}
+
+/// Goal posts as the optimiser sees them: where they stand and where they were seen.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PostBearings<'a> {
+    /// The field's posts, field frame, metres.
+    pub field: &'a [Point2<f64>],
+    /// Robot-frame bearings at which posts were seen, radians.
+    pub seen: &'a [f64],
+}
+
+impl PostBearings<'_> {
+    /// Each seen post's residual from the field post nearest in bearing under `pose`, radians, and
+    /// the residual's derivatives by (x, y, heading).
+    fn residuals(&self, pose: &Vector3<f64>) -> impl Iterator<Item = (f64, Vector3<f64>)> + '_ {
+        let (x, y, heading) = (pose.x, pose.y, pose.z);
+        self.seen.iter().filter_map(move |&seen| {
+            self.field
+                .iter()
+                .filter_map(|post| {
+                    let (dx, dy) = (post.x - x, post.y - y);
+                    let squared = dx * dx + dy * dy;
+                    (squared >= MIN_POST_DISTANCE * MIN_POST_DISTANCE).then(|| {
+                        let residual = normalize_angle(dy.atan2(dx) - heading - seen);
+                        (residual, Vector3::new(dy / squared, -dx / squared, -1.0))
+                    })
+                })
+                .min_by(|a, b| a.0.abs().total_cmp(&b.0.abs()))
+        })
+    }
+
+    /// The posts' robust cost under `pose`.
+    fn cost(&self, pose: &Vector3<f64>) -> f64 {
+        self.residuals(pose).map(|(residual, _)| cauchy(residual / POST_BEARING_SIGMA)).sum()
     }
 }
 
@@ -153,18 +197,19 @@ fn state_sigma(prior: &Prior) -> State {
 
 /// The cost using the map's cell distances: cheap, for the coarse search (no camera correction). Only
 /// every `stride`-th point is scored, its loss counted `stride` times, so that the lines keep their
-/// weight against the prior. `None` as soon as the cost is sure to exceed `limit`: every point's loss
-/// is at least zero, so the cost only grows as points are added.
+/// weight against the prior and the posts. `None` as soon as the cost is sure to exceed `limit`: every
+/// point's loss is at least zero, so the cost only grows as points are added.
 fn coarse_cost(
     map: &LineMap,
     observations: &[Observation],
+    posts: &PostBearings,
     stride: usize,
     pose: &Vector3<f64>,
     prior: &Prior,
     limit: Option<f64>,
 ) -> Option<f64> {
     let place = to_field(*pose);
-    let prior_cost = prior_loss(prior_residual(pose, prior).norm_squared());
+    let prior_cost = prior_loss(prior_residual(pose, prior).norm_squared()) + posts.cost(pose);
     let scale = stride as f64;
     let mut lines = 0.0;
     for observation in observations.iter().step_by(stride) {
@@ -190,6 +235,7 @@ fn coarse_offsets() -> impl Iterator<Item = Vector3<f64>> {
 fn coarse_starts(
     map: &LineMap,
     observations: &[Observation],
+    posts: &PostBearings,
     prior: &Prior,
     centre: &Vector3<f64>,
     step: &Vector3<f64>,
@@ -202,7 +248,7 @@ fn coarse_starts(
     for (order, offset) in grid {
         let pose = centre + offset.component_mul(step);
         let limit = (best.len() == STARTS).then(|| best[STARTS - 1].0);
-        let Some(cost) = coarse_cost(map, observations, stride, &pose, prior, limit) else { continue };
+        let Some(cost) = coarse_cost(map, observations, posts, stride, &pose, prior, limit) else { continue };
         let rank = best.partition_point(|&(known, known_order, _)| {
             known.total_cmp(&cost).then(known_order.cmp(&order)).is_lt()
         });
@@ -212,7 +258,8 @@ fn coarse_starts(
     best.into_iter().map(|(_, _, pose)| pose).collect()
 }
 
-/// Cost, Gauss–Newton normal equations (H, g) and the lines' share of H at a state.
+/// Cost, Gauss–Newton normal equations (H, g) and the lines' share of H at a state (the posts' share
+/// sharpens the pose but is not counted as the lines' evidence).
 struct Linearisation {
     cost: f64,
     hessian: Matrix5,
@@ -224,6 +271,7 @@ struct Linearisation {
 fn linearise(
     map: &LineMap,
     observations: &[Observation],
+    posts: &PostBearings,
     state: &State,
     prior: &Prior,
     calibrate: bool,
@@ -264,6 +312,17 @@ fn linearise(
         }
     }
     line_information.fixed_view_mut::<3, 3>(0, 0).add_assign(&pose_information);
+    let mut hessian = line_information;
+    for (residual, derivatives) in posts.residuals(&pose) {
+        let error = residual / POST_BEARING_SIGMA;
+        let ratio_squared = (error / CAUCHY_SCALE).powi(2);
+        cost += cauchy_loss(ratio_squared, CAUCHY_SCALE);
+        let jacobian = derivatives / POST_BEARING_SIGMA;
+        hessian
+            .fixed_view_mut::<3, 3>(0, 0)
+            .add_assign(cauchy_weight(ratio_squared) * jacobian * jacobian.transpose());
+        pose_gradient += cauchy_weight(ratio_squared) * error * jacobian;
+    }
     gradient.fixed_rows_mut::<3>(0).add_assign(&pose_gradient);
     let sigma = state_sigma(prior);
     let pose_residual = prior_residual(&pose, prior);
@@ -277,20 +336,21 @@ fn linearise(
         State::new(pose_residual.x, pose_residual.y, pose_residual.z, camera_residual.x, camera_residual.y);
     let prior_information = Matrix5::from_diagonal(&sigma.zip_map(&weights, |s, weight| weight / (s * s)));
     gradient += residual.component_mul(&weights).component_div(&sigma);
-    Linearisation { cost, hessian: line_information + prior_information, gradient, line_information }
+    Linearisation { cost, hessian: hessian + prior_information, gradient, line_information }
 }
 
 /// Levenberg–Marquardt from `start`.
 fn levenberg_marquardt(
     map: &LineMap,
     observations: &[Observation],
+    posts: &PostBearings,
     start: State,
     prior: &Prior,
     calibrate: bool,
     iterations: usize,
 ) -> (State, Linearisation) {
     let mut state = start;
-    let mut linearised = linearise(map, observations, &state, prior, calibrate);
+    let mut linearised = linearise(map, observations, posts, &state, prior, calibrate);
     let mut damping = 1e-3;
     for _ in 0..iterations {
         let mut improved = false;
@@ -312,7 +372,7 @@ fn levenberg_marquardt(
                 *correction = correction.clamp(-MAX_CALIBRATION, MAX_CALIBRATION);
             }
             // Linearised at once: an accepted step needs it next, and a rejected one costs little more.
-            let tried = linearise(map, observations, &candidate, prior, calibrate);
+            let tried = linearise(map, observations, posts, &candidate, prior, calibrate);
             if tried.cost < linearised.cost {
                 state = candidate;
                 linearised = tried;
@@ -336,24 +396,31 @@ fn negligible(step: &State) -> bool {
     step.fixed_rows::<2>(0).norm() <= NEGLIGIBLE_STEP.0 && step.fixed_rows::<3>(2).amax() <= NEGLIGIBLE_STEP.1
 }
 
-/// Fits the pose that best explains `observations`, starting from and held to `prior`: a coarse
-/// search over ±1.5 σ of the prior on the distance map (with at most [`COARSE_POINTS`] of the
-/// points), then Levenberg–Marquardt from the best few with the camera as given; with `calibrate`,
-/// from the best once more with the camera's pitch and roll free within their prior.
-pub fn fit(map: &LineMap, observations: &[Observation], prior: &Prior, calibrate: bool) -> Fit {
+/// Fits the pose that best explains `observations` and the `posts`' bearings, starting from and held
+/// to `prior`: a coarse search over ±1.5 σ of the prior on the distance map (with at most
+/// [`COARSE_POINTS`] of the points), then Levenberg–Marquardt from the best few with the camera as
+/// given; with `calibrate`, from the best once more with the camera's pitch and roll free within
+/// their prior.
+pub fn fit(
+    map: &LineMap,
+    observations: &[Observation],
+    posts: &PostBearings,
+    prior: &Prior,
+    calibrate: bool,
+) -> Fit {
     let centre = Vector3::new(prior.pose.x(), prior.pose.y(), prior.pose.heading());
     let step = prior.sigma * SEARCH_STEP_SIGMAS;
-    let (state, linearised) = coarse_starts(map, observations, prior, &centre, &step)
+    let (state, linearised) = coarse_starts(map, observations, posts, prior, &centre, &step)
         .into_iter()
         .map(|start| {
             let start = State::new(start.x, start.y, start.z, 0.0, 0.0);
-            levenberg_marquardt(map, observations, start, prior, false, MAX_ITERATIONS)
+            levenberg_marquardt(map, observations, posts, start, prior, false, MAX_ITERATIONS)
         })
         .min_by(|a, b| a.1.cost.total_cmp(&b.1.cost))
         .expect("at least one start");
     let calibrated = calibrate && explained_share(map, observations, &state) >= CORRECTABLE_SHARE;
     let (state, linearised) = if calibrated {
-        levenberg_marquardt(map, observations, state, prior, true, CALIBRATION_ITERATIONS)
+        levenberg_marquardt(map, observations, posts, state, prior, true, CALIBRATION_ITERATIONS)
     } else {
         (state, linearised)
     };
@@ -458,18 +525,31 @@ mod tests {
         let mut all: Vec<(f64, Vector3<f64>)> = coarse_offsets()
             .map(|offset| {
                 let pose = centre + offset.component_mul(&step);
-                (coarse_cost(&map, &observations, 1, &pose, &prior, None).unwrap(), pose)
+                (
+                    coarse_cost(&map, &observations, &PostBearings::default(), 1, &pose, &prior, None)
+                        .unwrap(),
+                    pose,
+                )
             })
             .collect();
         assert_eq!(all.len(), 125);
         all.sort_by(|a, b| a.0.total_cmp(&b.0));
         let expected: Vec<Vector3<f64>> = all.iter().take(STARTS).map(|&(_, pose)| pose).collect();
-        assert_eq!(coarse_starts(&map, &observations, &prior, &centre, &step), expected);
+        assert_eq!(
+            coarse_starts(&map, &observations, &PostBearings::default(), &prior, &centre, &step),
+            expected
+        );
         // A pose's cost is left once it is sure to exceed the limit, and kept while it may not.
         let (best, _) = all[0];
-        assert_eq!(coarse_cost(&map, &observations, 1, &expected[0], &prior, Some(best)), Some(best));
+        assert_eq!(
+            coarse_cost(&map, &observations, &PostBearings::default(), 1, &expected[0], &prior, Some(best)),
+            Some(best)
+        );
         let (worst, pose) = all[all.len() - 1];
-        assert_eq!(coarse_cost(&map, &observations, 1, &pose, &prior, Some(best)), None);
+        assert_eq!(
+            coarse_cost(&map, &observations, &PostBearings::default(), 1, &pose, &prior, Some(best)),
+            None
+        );
         assert!(worst > best);
     }
 
@@ -485,7 +565,7 @@ mod tests {
             sigma: Vector3::new(0.4, 0.4, 0.2),
             camera_sigma: Vector2::repeat(1.0_f64.to_radians()),
         };
-        let fit = fit(&map, &observations, &prior, true);
+        let fit = fit(&map, &observations, &PostBearings::default(), &prior, true);
         assert!(fit.pose.distance_to(&truth) < 0.01, "{:?}", fit.pose);
         assert_abs_diff_eq!(fit.pose.heading(), truth.heading(), epsilon = 0.005);
         assert!(fit.covariance[(0, 0)].sqrt() < 0.05);
@@ -505,11 +585,41 @@ mod tests {
             sigma: Vector3::new(0.3, 0.3, 0.1),
             camera_sigma: Vector2::repeat(0.02),
         };
-        let fit = fit(&map, &observations, &prior, true);
+        let fit = fit(&map, &observations, &PostBearings::default(), &prior, true);
         assert_abs_diff_eq!(fit.pose.y(), truth.y(), epsilon = 0.01);
         assert_abs_diff_eq!(fit.pose.x(), 1.4, epsilon = 0.05);
         // Along the line the lines say nothing: the information there is (almost) zero.
         assert!(fit.line_information[(0, 0)] < 1e-6 * fit.line_information[(1, 1)]);
+    }
+
+    #[test]
+    fn a_goal_post_s_bearing_places_the_robot_along_the_one_line_it_sees() {
+        let field = FieldModel::default();
+        let map = LineMap::new(&field);
+        // Near the touchline, looking along it towards a goal: the touchline and one post in view.
+        let truth = FieldPose::new(1.2, 2.6, 0.0).unwrap();
+        let observations: Vec<Observation> =
+            observe(&field, &truth, 2.5).into_iter().filter(|o| (o.ground.y - 0.4).abs() < 0.01).collect();
+        let post = field.goals[1].posts[0];
+        let seen = truth.field_to_robot(post);
+        let field_posts: Vec<Point2<f64>> = field.goals.iter().flat_map(|goal| goal.posts).collect();
+        let posts = PostBearings { field: &field_posts, seen: &[seen.y.atan2(seen.x)] };
+        let prior = Prior {
+            pose: FieldPose::new(1.4, 2.5, 0.05).unwrap(),
+            sigma: Vector3::new(0.3, 0.3, 0.1),
+            camera_sigma: Vector2::repeat(0.02),
+        };
+        let fit = fit(&map, &observations, &posts, &prior, true);
+        assert!(fit.pose.distance_to(&truth) < 0.02, "{:?}", fit.pose);
+        assert_abs_diff_eq!(fit.pose.heading(), truth.heading(), epsilon = 0.005);
+        // Its bearing changes by 0.13 rad per metre along the line here: σ 0.5° is about 7 cm.
+        assert!(fit.covariance[(0, 0)].sqrt() < 0.1, "{}", fit.covariance[(0, 0)].sqrt());
+        // The post sharpens the pose, but it is not the lines' evidence.
+        assert!(fit.line_information[(0, 0)] < 1e-6 * fit.line_information[(1, 1)]);
+        // A bearing far from every post's is one loose observation, not a pull.
+        let astray = PostBearings { field: &field_posts, seen: &[1.2] };
+        let fit = super::fit(&map, &observations, &astray, &prior, true);
+        assert_abs_diff_eq!(fit.pose.x(), 1.4, epsilon = 0.05);
     }
 
     #[test]
@@ -535,7 +645,7 @@ mod tests {
             sigma: Vector3::new(0.25, 0.25, 0.05),
             camera_sigma: Vector2::repeat(0.02),
         };
-        let fit = fit(&map, &observations, &prior, false);
+        let fit = fit(&map, &observations, &PostBearings::default(), &prior, false);
         assert_abs_diff_eq!(fit.pose.y(), truth.y(), epsilon = 0.01);
         assert!((fit.pose.x() - truth.x()).abs() < 0.06, "{:?}", fit.pose);
     }
@@ -566,9 +676,9 @@ mod tests {
             sigma: Vector3::new(0.4, 0.4, 0.2),
             camera_sigma: Vector2::repeat(0.02),
         };
-        let trusted = fit(&map, &observations, &prior, false);
+        let trusted = fit(&map, &observations, &PostBearings::default(), &prior, false);
         assert!(trusted.pose.distance_to(&truth) > 0.05, "the error moves the fit: {:?}", trusted.pose);
-        let corrected = fit(&map, &observations, &prior, true);
+        let corrected = fit(&map, &observations, &PostBearings::default(), &prior, true);
         assert!(corrected.pose.distance_to(&truth) < 0.02, "{:?}", corrected.pose);
         assert_abs_diff_eq!(corrected.pose.heading(), truth.heading(), epsilon = 0.005);
         assert_abs_diff_eq!(corrected.calibration.x, error, epsilon = 0.15_f64.to_radians());

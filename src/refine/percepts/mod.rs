@@ -159,8 +159,7 @@ impl ImagePercepts {
     }
 
     /// The goal posts standing on this carpet in `frame` (the frame these percepts were found in):
-    /// upright bright bars from the carpet up past the field's border. The pipeline
-    /// does not use them yet; `relocd inspect` shows them.
+    /// upright bright bars from the carpet up past the field's border.
     pub fn goal_posts(&self, frame: &Frame) -> Vec<PostSighting> {
         let (width, height) = frame.dimensions();
         let Some(palette) = self.palette.filter(|_| (width, height) == (self.width, self.height)) else {
@@ -193,11 +192,28 @@ pub struct LinePoint {
     pub calibration_rates: [Vector2<f64>; 2],
 }
 
+/// A goal post standing on the ground.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PostPoint {
+    /// Where its foot lies on the ground in the robot frame (x forward, y left), metres: its bearing
+    /// is as good as the foot's column, its distance only as good as the foot's row.
+    pub ground: Point2<f64>,
+}
+
+impl PostPoint {
+    /// Its direction from the robot, radians (counter-clockwise from straight ahead).
+    pub fn bearing(&self) -> f64 {
+        self.ground.y.atan2(self.ground.x)
+    }
+}
+
 /// The line points of one frame, with what is needed to tell where lines should have been seen.
 #[derive(Clone, Debug)]
 pub struct FramePercepts {
     /// The line points found.
     pub points: Vec<LinePoint>,
+    /// The goal posts found.
+    pub posts: Vec<PostPoint>,
     intrinsics: CameraIntrinsics,
     camera_pose: CameraPose,
     /// How far off the camera pose may be in (pitch, roll), radians.
@@ -328,6 +344,21 @@ impl Pixels<'_> {
                 line.extend(pairs.take(length));
             }
         }
+    }
+
+    /// Row `y`'s pixels, into `line`; a YUYV frame a pixel pair (four bytes) at a time.
+    fn row(&self, y: usize, line: &mut Vec<Yuv>) {
+        line.clear();
+        let Frame::Yuyv(image) = self.frame else {
+            line.extend((0..self.width).map(|x| self.yuv(x, y)));
+            return;
+        };
+        let stride = 2 * self.width;
+        let pairs = image.as_bytes()[y * stride..(y + 1) * stride].chunks_exact(4).flat_map(|pair| {
+            let (u, v) = (f32::from(pair[1]), f32::from(pair[3]));
+            [(f32::from(pair[0]), u, v), (f32::from(pair[2]), u, v)]
+        });
+        line.extend(pairs.take(self.width));
     }
 
     /// The mean of three pixels across a scan line at `along` on the scan line at `across`: carpet
@@ -626,8 +657,13 @@ pub fn detect(
         let stride = points.len() as f64 / MAX_POINTS as f64;
         points = (0..MAX_POINTS).map(|i| points[(i as f64 * stride) as usize]).collect();
     }
+    let posts = image
+        .goal_posts(frame)
+        .into_iter()
+        .filter_map(|post| Some(PostPoint { ground: camera.ground_point(post.foot.x, post.foot.y)? }))
+        .collect();
     let camera_sigma = CameraCalibration::default().sigma;
-    Ok(FramePercepts { points, intrinsics, camera_pose: *camera_pose, camera_sigma, image })
+    Ok(FramePercepts { points, posts, intrinsics, camera_pose: *camera_pose, camera_sigma, image })
 }
 
 /// The camera of a robot standing at the robot-frame origin, at `pose` turned by `pitch` and `roll`
@@ -655,7 +691,7 @@ mod tests {
     use image::{Rgb, RgbImage};
 
     #[test]
-    fn a_yuyv_scan_line_is_its_pixels_smoothed_one_by_one() {
+    fn a_yuyv_scan_line_or_row_is_its_pixels_read_one_by_one() {
         let (width, height) = (10usize, 6usize);
         let data: Vec<u8> = (0..width * height * 2).map(|i| (i * 37 % 251) as u8).collect();
         let frame = Frame::Yuyv(crate::frame::YuyvImage::new(width as u32, height as u32, data).unwrap());
@@ -668,6 +704,11 @@ mod tests {
                     (0..length).map(|along| pixels.smoothed(axis, across, along, limit)).collect();
                 assert_eq!(line, one_by_one, "{axis:?} {across}");
             }
+        }
+        for y in 0..height {
+            pixels.row(y, &mut line);
+            let one_by_one: Vec<Yuv> = (0..width).map(|x| pixels.yuv(x, y)).collect();
+            assert_eq!(line, one_by_one, "row {y}");
         }
     }
 

@@ -15,7 +15,7 @@ use super::Pixels;
 use super::palette::{Palette, Yuv};
 
 /// Rows between the rows searched for bars.
-const ROW_STEP: usize = 2;
+const ROW_STEP: usize = 4;
 /// Pixels beyond an edge at which a bar's sides are read (past the edge's blur).
 const SIDE_OFFSET: usize = 3;
 /// A post's inside is at least this share brighter than each side ...
@@ -32,10 +32,11 @@ const MAX_WIDTH_SHARE: f64 = 0.12;
 const MAX_LEAN: f64 = 0.15;
 /// A chained bar's width lies within this factor of the previous one's (either way).
 const WIDTH_FACTOR: f64 = 1.6;
-/// Rows a chain may skip and still continue (a seam, a sensor glitch), in row steps.
+/// Row steps from a chain's last bar within which its next bar may come: one searched row without
+/// the bar (a seam, a blurred edge) does not end the chain.
 const MAX_GAP_STEPS: usize = 2;
 /// Least bars in a post.
-const MIN_BARS: usize = 6;
+const MIN_BARS: usize = 3;
 /// A post is at least this many times as tall as it is wide where seen (a post 0.8 m tall and 0.1 m
 /// wide, under its crossbar or cut by the top of the image; a robot is stouter).
 const MIN_ASPECT: f64 = 4.5;
@@ -88,8 +89,7 @@ pub(super) fn find(
     let mut open: Vec<Vec<Bar>> = Vec::new();
     let mut chains: Vec<Vec<Bar>> = Vec::new();
     for row in (0..height).step_by(ROW_STEP) {
-        line.clear();
-        line.extend((0..width).map(|x| pixels.yuv(x, row)));
+        pixels.row(row, &mut line);
         let bars = bars_on(&line, palette, max_width, row);
         let mut extended = vec![false; open.len()];
         for bar in bars {
@@ -171,8 +171,8 @@ fn bars_on(line: &[Yuv], palette: &Palette, max_width: usize, row: usize) -> Vec
 /// clearly coloured where the paint is grey (a white post before a pastel wall).
 fn stands_out(paint: Yuv, side: Yuv) -> bool {
     let brighter = paint.0 >= (side.0 * (1.0 + CONTRAST_SHARE)).max(side.0 + MIN_STEP);
-    let chroma = (paint.1 - side.1).hypot(paint.2 - side.2);
-    brighter || (paint.0 + MIN_STEP >= side.0 && chroma >= CHROMA_STEP)
+    let (du, dv) = (paint.1 - side.1, paint.2 - side.2);
+    brighter || (paint.0 + MIN_STEP >= side.0 && du * du + dv * dv >= CHROMA_STEP * CHROMA_STEP)
 }
 
 /// Whether `pixels`, a bar with [`SIDE_OFFSET`] + 1 pixels of its surroundings on either side, is
