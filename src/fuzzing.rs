@@ -83,6 +83,9 @@ pub fn frame(bytes: &[u8]) {
             for point in &found.points {
                 assert!(point.ground.x.is_finite() && point.ground.y.is_finite(), "{point:?}");
             }
+            for post in &found.posts {
+                assert!(post.bearing().is_finite(), "{post:?}");
+            }
             // Goal posts lie inside the frame.
             let (width, height) = frame.dimensions();
             for post in found.image().goal_posts(&frame) {

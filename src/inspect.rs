@@ -253,23 +253,26 @@ fn inspect_frame(
 
 /// Frames each goal post in green from its top to its foot, with a tick at the foot.
 fn draw_posts(canvas: &mut RgbImage, posts: &[PostSighting]) {
-    let (width, height) = canvas.dimensions();
-    let mut put = |x: f64, y: f64| {
-        if x >= 0.0 && y >= 0.0 && (x as u32) < width && (y as u32) < height {
-            canvas.put_pixel(x as u32, y as u32, Rgb([0, 255, 60]));
-        }
-    };
+    const GREEN: [u8; 3] = [0, 255, 60];
     for post in posts {
         let half = post.width / 2.0 + 1.0;
         let mut v = post.top;
         while v <= post.foot.y {
-            put(post.foot.x - half, v);
-            put(post.foot.x + half, v);
+            put(canvas, post.foot.x - half, v, GREEN);
+            put(canvas, post.foot.x + half, v, GREEN);
             v += 1.0;
         }
         for d in -4..=4 {
-            put(post.foot.x + f64::from(d), post.foot.y);
+            put(canvas, post.foot.x + f64::from(d), post.foot.y, GREEN);
         }
+    }
+}
+
+/// Paints the pixel at (`x`, `y`) in `colour` where it lies inside `canvas`.
+fn put(canvas: &mut RgbImage, x: f64, y: f64, colour: [u8; 3]) {
+    let (width, height) = canvas.dimensions();
+    if x >= 0.0 && y >= 0.0 && (x as u32) < width && (y as u32) < height {
+        canvas.put_pixel(x as u32, y as u32, Rgb(colour));
     }
 }
 
@@ -294,11 +297,6 @@ fn draw_overlay(
 ) -> RgbImage {
     let mut canvas = frame.to_rgb();
     let (width, height) = canvas.dimensions();
-    let put = |canvas: &mut RgbImage, x: f64, y: f64, colour: [u8; 3]| {
-        if x >= 0.0 && y >= 0.0 && (x as u32) < width && (y as u32) < height {
-            canvas.put_pixel(x as u32, y as u32, Rgb(colour));
-        }
-    };
     if let Some((pose, camera_pose)) = truth {
         let camera = Camera::new(options.intrinsics.with_resolution(width, height), &pose, &camera_pose);
         for sample in field_lines {
