@@ -92,7 +92,7 @@ fn goal_posts_are_found_where_they_stand() {
 #[test]
 fn a_post_s_bearing_on_the_ground_is_the_true_post_s() {
     // The bearings the line fit uses: each post found, put on the ground under the frame's camera,
-    // points at a field post under the true pose (within its own width and a pixel or two).
+    // points within 1° at a field post under the true pose.
     let field = FieldModel::default();
     let randomisation = Randomisation::default();
     let (mut posts, mut right) = (0, 0);
