@@ -105,9 +105,7 @@ fn a_post_s_bearing_on_the_ground_is_the_true_post_s() {
         for post in &percepts.posts {
             posts += 1;
             let nearest = field
-                .goals
-                .iter()
-                .flat_map(|goal| goal.posts)
+                .goal_posts()
                 .map(|true_post| {
                     let seen = sampled.pose.field_to_robot(true_post);
                     let difference = seen.y.atan2(seen.x) - post.bearing();

@@ -368,6 +368,11 @@ impl FieldModel {
         &self.dimensions
     }
 
+    /// The centres of all four goal posts.
+    pub fn goal_posts(&self) -> impl Iterator<Item = Point2<f64>> + '_ {
+        self.goals.iter().flat_map(|goal| goal.posts)
+    }
+
     /// Whether a ground point is covered by white paint.
     pub fn is_painted(&self, point: Point2<f64>) -> bool {
         let width = self.dimensions.line_width;

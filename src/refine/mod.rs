@@ -281,7 +281,7 @@ impl LineRefiner {
             correct_camera: true,
             line_width: field.dimensions().line_width,
             line_samples,
-            posts: field.goals.iter().flat_map(|goal| goal.posts).collect(),
+            posts: field.goal_posts().collect(),
         }
     }
 

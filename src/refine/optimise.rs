@@ -571,20 +571,26 @@ mod tests {
         assert!(fit.covariance[(0, 0)].sqrt() < 0.05);
     }
 
-    #[test]
-    fn one_line_leaves_its_direction_to_the_prior() {
-        let field = FieldModel::default();
-        let map = LineMap::new(&field);
-        // Near the touchline, looking along it: only the touchline in view.
+    /// Near the touchline, looking along it: only the touchline's points in view, the truth, and a
+    /// guess 20 cm along it and 10 cm across.
+    fn touchline_view(field: &FieldModel) -> (FieldPose, Vec<Observation>, Prior) {
         let truth = FieldPose::new(1.2, 2.6, 0.0).unwrap();
         let observations: Vec<Observation> =
-            observe(&field, &truth, 2.5).into_iter().filter(|o| (o.ground.y - 0.4).abs() < 0.01).collect();
-        assert!(observations.len() > 10);
+            observe(field, &truth, 2.5).into_iter().filter(|o| (o.ground.y - 0.4).abs() < 0.01).collect();
         let prior = Prior {
             pose: FieldPose::new(1.4, 2.5, 0.05).unwrap(),
             sigma: Vector3::new(0.3, 0.3, 0.1),
             camera_sigma: Vector2::repeat(0.02),
         };
+        (truth, observations, prior)
+    }
+
+    #[test]
+    fn one_line_leaves_its_direction_to_the_prior() {
+        let field = FieldModel::default();
+        let map = LineMap::new(&field);
+        let (truth, observations, prior) = touchline_view(&field);
+        assert!(observations.len() > 10);
         let fit = fit(&map, &observations, &PostBearings::default(), &prior, true);
         assert_abs_diff_eq!(fit.pose.y(), truth.y(), epsilon = 0.01);
         assert_abs_diff_eq!(fit.pose.x(), 1.4, epsilon = 0.05);
@@ -596,19 +602,11 @@ mod tests {
     fn a_goal_post_s_bearing_places_the_robot_along_the_one_line_it_sees() {
         let field = FieldModel::default();
         let map = LineMap::new(&field);
-        // Near the touchline, looking along it towards a goal: the touchline and one post in view.
-        let truth = FieldPose::new(1.2, 2.6, 0.0).unwrap();
-        let observations: Vec<Observation> =
-            observe(&field, &truth, 2.5).into_iter().filter(|o| (o.ground.y - 0.4).abs() < 0.01).collect();
-        let post = field.goals[1].posts[0];
-        let seen = truth.field_to_robot(post);
-        let field_posts: Vec<Point2<f64>> = field.goals.iter().flat_map(|goal| goal.posts).collect();
+        // Looking along the touchline towards a goal: the touchline and one post in view.
+        let (truth, observations, prior) = touchline_view(&field);
+        let seen = truth.field_to_robot(field.goals[1].posts[0]);
+        let field_posts: Vec<Point2<f64>> = field.goal_posts().collect();
         let posts = PostBearings { field: &field_posts, seen: &[seen.y.atan2(seen.x)] };
-        let prior = Prior {
-            pose: FieldPose::new(1.4, 2.5, 0.05).unwrap(),
-            sigma: Vector3::new(0.3, 0.3, 0.1),
-            camera_sigma: Vector2::repeat(0.02),
-        };
         let fit = fit(&map, &observations, &posts, &prior, true);
         assert!(fit.pose.distance_to(&truth) < 0.02, "{:?}", fit.pose);
         assert_abs_diff_eq!(fit.pose.heading(), truth.heading(), epsilon = 0.005);
