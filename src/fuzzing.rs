@@ -8,7 +8,7 @@ use std::path::Path;
 
 use crate::daemon::config::Config;
 use crate::frame::{Frame, YuyvImage};
-use crate::geometry::{CameraIntrinsics, CameraPose};
+use crate::geometry::{CameraIntrinsics, CameraPose, FieldDimensions};
 use crate::protocol::control::ControlRequest;
 use crate::protocol::frame_header::{FrameHeader, HEADER_SIZE};
 use crate::protocol::gamecontroller::GameControlData;
@@ -78,18 +78,16 @@ pub fn frame(bytes: &[u8]) {
         if let Ok(image) = image {
             let camera = parsed.camera.unwrap_or_default();
             let frame = Frame::Yuyv(image);
-            let found = detect(&frame, &CameraIntrinsics::nao_top(), &camera, 0.05)
+            let found = detect(&frame, &CameraIntrinsics::nao_top(), &camera, &FieldDimensions::default())
                 .expect("a valid frame can be searched");
             for point in &found.points {
                 assert!(point.ground.x.is_finite() && point.ground.y.is_finite(), "{point:?}");
             }
-            for post in &found.posts {
-                assert!(post.bearing().is_finite(), "{post:?}");
-            }
-            // Goal posts lie inside the frame.
+            // Goal posts are finite and lie inside the frame.
             let (width, height) = frame.dimensions();
-            for post in found.image().goal_posts(&frame) {
-                let foot = post.foot;
+            for post in &found.posts {
+                let foot = post.sighting.foot;
+                assert!(post.bearing().is_finite(), "{post:?}");
                 assert!(
                     foot.x >= 0.0 && foot.x <= f64::from(width) && foot.y <= f64::from(height),
                     "{post:?}"

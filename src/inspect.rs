@@ -3,8 +3,9 @@
 //!
 //! Each frame is searched as line refinement searches it ([`crate::refine::detect`]): the carpet's top
 //! edge, the line crossings in the image, and the line points that survive the ground-width gate under
-//! the frame's camera pose; and the goal posts standing on the carpet (image space only). With no pose
-//! at all (`camera: None`) only the image stage runs.
+//! the frame's camera pose; and the goal posts standing on the carpet that rise as a goal's would under
+//! that pose. With no pose at all (`camera: None`) only the image stage runs (every upright bar found
+//! standing on the carpet counts as a post).
 
 use std::fs;
 use std::path::{Path, PathBuf};
@@ -103,7 +104,7 @@ pub struct Inspection {
     /// The line points, `[u, v]` pixel centres of the crossings kept (all crossings without a camera).
     pub line_points: Vec<[f64; 2]>,
     /// The goal posts standing on the carpet, `[u, v, width]`: the centre of each post's foot and its
-    /// width there, pixels.
+    /// width there, pixels (with a camera, those that rise as a goal's post would under it).
     pub goal_posts: Vec<[f64; 3]>,
     /// The same points on the ground in the robot frame, `[x, y]` metres (x forward, y left); absent
     /// without a camera.
@@ -199,24 +200,25 @@ fn inspect_frame(
 ) -> Result<Inspection, InspectError> {
     let failed = |source| InspectError::Percepts { path: file.to_path_buf(), source };
     let (width, height) = frame.dimensions();
-    let line_width = options.field.dimensions().line_width;
-    let (image, points, ground, at_truth) = match camera {
+    let (image, points, posts, ground, at_truth) = match camera {
         Some(pose) => {
-            let percepts = detect(frame, &options.intrinsics, &pose, line_width).map_err(failed)?;
+            let percepts =
+                detect(frame, &options.intrinsics, &pose, options.field.dimensions()).map_err(failed)?;
             let pixels: Vec<Point2<f64>> = percepts.points.iter().map(|point| point.pixel).collect();
             let ground: Vec<[f64; 2]> =
                 percepts.points.iter().map(|point| [point.ground.x, point.ground.y]).collect();
             let at_truth =
                 truth.and_then(|(pose, _, refiner)| refiner.check_at(std::slice::from_ref(&percepts), &pose));
-            (percepts.image().clone(), pixels, Some(ground), at_truth)
+            let posts = percepts.posts.iter().map(|post| post.sighting).collect();
+            (percepts.image().clone(), pixels, posts, Some(ground), at_truth)
         }
         None => {
             let image = detect_in_image(frame).map_err(failed)?;
             let pixels = image.crossings.iter().map(|crossing| crossing.centre()).collect();
-            (image, pixels, None, None)
+            let posts = image.goal_posts(frame);
+            (image, pixels, posts, None, None)
         }
     };
-    let posts = image.goal_posts(frame);
     if let Some(out) = &options.out {
         let name =
             file.file_name().map_or_else(|| "frame".into(), |name| name.to_string_lossy().into_owned());

@@ -305,7 +305,7 @@ impl LineRefiner {
         intrinsics: &CameraIntrinsics,
         camera: &CameraPose,
     ) -> Result<FramePercepts, PerceptError> {
-        detect(frame, intrinsics, camera, self.line_width)
+        detect(frame, intrinsics, camera, self.field.dimensions())
     }
 
     /// Verifies and refines each guess against the line points of a burst's frames: the fitted pose
@@ -754,7 +754,7 @@ mod tests {
         let intrinsics = CameraIntrinsics::nao_top();
         let camera = Camera::new(intrinsics, &sampled.pose, &sampled.camera);
         let frame = Frame::Rgb(render(&sampled.scene, &camera, &sampled.settings));
-        let percepts = detect(&frame, &intrinsics, &sampled.camera, field.dimensions().line_width).unwrap();
+        let percepts = detect(&frame, &intrinsics, &sampled.camera, field.dimensions()).unwrap();
         let one = observations(std::slice::from_ref(&percepts));
         assert!(5 * one.len() > MAX_BURST_POINTS, "{}", one.len());
         let burst = observations(&vec![percepts; 5]);

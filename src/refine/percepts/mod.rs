@@ -18,19 +18,20 @@
 //! - On the ground ([`detect`]): a crossing is kept when its width on the ground fits a painted line
 //!   (a robot's leg or a ball, standing above the ground, projects far wider) under the camera pose or
 //!   a pose a few degrees of pitch away (what a real robot's joint sensors may be off by), and its
-//!   centre projects onto the ground.
+//!   centre projects onto the ground. A goal post found in the image is kept when it rises as a
+//!   goal's post would over its foot's distance (a robot's leg does not).
 
 mod chains;
 mod palette;
 mod posts;
 mod scan;
 
-use nalgebra::{Point2, Vector2};
+use nalgebra::{Point2, Point3, Vector2};
 use thiserror::Error;
 
 use super::calibration::CameraCalibration;
 use crate::frame::{Frame, rgb_to_yuv};
-use crate::geometry::{Camera, CameraIntrinsics, CameraPose, FieldPose};
+use crate::geometry::{Camera, CameraIntrinsics, CameraPose, FieldDimensions, FieldPose};
 use palette::{Palette, Yuv};
 pub use posts::PostSighting;
 use scan::Crossing;
@@ -64,6 +65,13 @@ const RUNNING_WEIGHT: f32 = 1.0 / 32.0;
 /// Scan spacings within which a crossing that lines up with none of its family is kept beside a kept
 /// crossing of the other family (see [`chains::near_any`]).
 const JUNCTION_REACH: f64 = 1.5;
+/// Share of the goal's height a post must be seen to rise above its foot, unless the top of the image
+/// cuts it: a robot's leg, as white and upright as a post, rises less before the robot's body widens
+/// it. Half, so that a camera pitched a few degrees off (which misjudges the foot's distance, and so
+/// the rise expected) still keeps a goal's post.
+const MIN_POST_RISE: f64 = 0.5;
+/// Rows under the top of the image within which a post's top is cut by it.
+const IMAGE_TOP_ROWS: f64 = 8.0;
 /// Line points kept per frame at most (evenly thinned beyond).
 pub const MAX_POINTS: usize = 400;
 
@@ -198,6 +206,8 @@ pub struct PostPoint {
     /// Where its foot lies on the ground in the robot frame (x forward, y left), metres: its bearing
     /// is as good as the foot's column, its distance only as good as the foot's row.
     pub ground: Point2<f64>,
+    /// Where it was seen in the image.
+    pub sighting: PostSighting,
 }
 
 impl PostPoint {
@@ -605,14 +615,16 @@ fn continues(
     (before && (after || reaches(true))) || (after && reaches(false))
 }
 
-/// Finds the field-line points of `frame`, taken by a camera with `intrinsics` (any resolution: the
-/// field of view is what counts) at `camera_pose` on the robot.
+/// Finds the field-line points and goal posts of `frame`, taken by a camera with `intrinsics` (any
+/// resolution: the field of view is what counts) at `camera_pose` on the robot, on a field of
+/// `dimensions` (its line width and goal height).
 pub fn detect(
     frame: &Frame,
     intrinsics: &CameraIntrinsics,
     camera_pose: &CameraPose,
-    line_width: f64,
+    dimensions: &FieldDimensions,
 ) -> Result<FramePercepts, PerceptError> {
+    let line_width = dimensions.line_width;
     let (width, height) = frame.dimensions();
     let fov_ok = |angle: f64| angle.is_finite() && angle > 0.0 && angle < std::f64::consts::PI;
     if width > 0 && height > 0 && (!fov_ok(intrinsics.horizontal_fov) || !fov_ok(intrinsics.vertical_fov)) {
@@ -660,7 +672,11 @@ pub fn detect(
     let posts = image
         .goal_posts(frame)
         .into_iter()
-        .filter_map(|post| Some(PostPoint { ground: camera.ground_point(post.foot.x, post.foot.y)? }))
+        .filter_map(|sighting| {
+            let ground = camera.ground_point(sighting.foot.x, sighting.foot.y)?;
+            rises_as_a_post(&camera, &ground, &sighting, dimensions.goal_height)
+                .then_some(PostPoint { ground, sighting })
+        })
         .collect();
     let camera_sigma = CameraCalibration::default().sigma;
     Ok(FramePercepts { points, posts, intrinsics, camera_pose: *camera_pose, camera_sigma, image })
@@ -671,6 +687,13 @@ pub fn detect(
 fn robot_camera(intrinsics: CameraIntrinsics, pose: &CameraPose, pitch: f64, roll: f64) -> Option<Camera> {
     let origin = FieldPose::new(0.0, 0.0, 0.0).expect("the origin is finite");
     Some(Camera::new(intrinsics, &origin, &pose.corrected(pitch, roll).ok()?))
+}
+
+/// Whether a post seen at `sighting`, its foot at `ground`, rises in the image as a goal `goal_height`
+/// tall would (at least [`MIN_POST_RISE`] of it) or up to the top of the image.
+fn rises_as_a_post(camera: &Camera, ground: &Point2<f64>, sighting: &PostSighting, goal_height: f64) -> bool {
+    let risen = camera.project(&Point3::new(ground.x, ground.y, MIN_POST_RISE * goal_height));
+    sighting.top <= risen.map_or(IMAGE_TOP_ROWS, |pixel| pixel.y.max(IMAGE_TOP_ROWS))
 }
 
 /// Whether a crossing's width on the ground under `camera` fits a painted line of `line_width`.
@@ -720,7 +743,8 @@ mod tests {
             Rgb(if robot { [128, 128, 128] } else { [60, 130, 50] })
         }));
         let camera = CameraPose::new(0.5, 0.3, 0.0, 0.0).unwrap();
-        let percepts = detect(&frame, &CameraIntrinsics::nao_top(), &camera, 0.05).unwrap();
+        let percepts =
+            detect(&frame, &CameraIntrinsics::nao_top(), &camera, &FieldDimensions::default()).unwrap();
         assert!(percepts.points.is_empty());
         assert!(percepts.searched(&Point2::new(100.0, 360.0), 10.0), "open carpet");
         assert!(!percepts.searched(&Point2::new(320.0, 360.0), 10.0), "behind the robot");
@@ -738,11 +762,48 @@ mod tests {
             Rgb(if post { [200, 200, 200] } else { [60, 130, 50] })
         }));
         let camera = CameraPose::new(0.5, 0.3, 0.0, 0.0).unwrap();
-        let percepts = detect(&frame, &CameraIntrinsics::nao_top(), &camera, 0.05).unwrap();
+        let percepts =
+            detect(&frame, &CameraIntrinsics::nao_top(), &camera, &FieldDimensions::default()).unwrap();
         assert!(!percepts.searched(&Point2::new(326.0, 200.0), 6.0), "right beside the post");
         assert!(!percepts.searched(&Point2::new(292.0, 200.0), 6.0), "on its other side");
         assert!(percepts.searched(&Point2::new(400.0, 200.0), 6.0), "clear of the post");
         assert!(percepts.searched(&Point2::new(326.0, 360.0), 6.0), "below its foot");
+    }
+
+    #[test]
+    fn a_post_rises_as_a_goal_s_post_would_under_the_camera() {
+        // Carpet below row 200 and the hall above it; upright white bars standing 30 px into the
+        // carpet, each found in the image: a post up to row 60, a robot's leg up to row 170.
+        let bars = |bars: &[(u32, u32)]| {
+            let bars = bars.to_vec();
+            Frame::Rgb(RgbImage::from_fn(640, 480, move |x, y| {
+                let paint =
+                    bars.iter().any(|&(left, top)| (left..left + 10).contains(&x) && (top..230).contains(&y));
+                Rgb(if paint {
+                    [230, 232, 230]
+                } else if y >= 200 {
+                    [60, 130, 50]
+                } else {
+                    [40, 40, 45]
+                })
+            }))
+        };
+        let kept = |frame: &Frame, camera: &CameraPose, dimensions: &FieldDimensions| -> Vec<f64> {
+            assert_eq!(detect_in_image(frame).unwrap().goal_posts(frame).len(), 2, "both stand in the image");
+            let percepts = detect(frame, &CameraIntrinsics::nao_top(), camera, dimensions).unwrap();
+            // Each kept post by the bar it stands for (its left edge).
+            percepts.posts.iter().map(|post| (post.sighting.foot.x / 50.0).floor() * 50.0).collect()
+        };
+        // 3.1 m away under this camera, half a goal's height rises to about row 151.
+        let camera = CameraPose::new(0.5, 10.0_f64.to_radians(), 0.0, 0.0).unwrap();
+        let frame = bars(&[(300, 60), (450, 170)]);
+        assert_eq!(kept(&frame, &camera, &FieldDimensions::default()), vec![300.0]);
+        // Looking down at a goal 1.2 m tall 1.1 m away, half its height is above the image: a post
+        // must reach the image's top.
+        let camera = CameraPose::new(0.5, 25.0_f64.to_radians(), 0.0, 0.0).unwrap();
+        let tall = FieldDimensions { goal_height: 1.2, ..FieldDimensions::default() };
+        let frame = bars(&[(300, 0), (450, 20)]);
+        assert_eq!(kept(&frame, &camera, &tall), vec![300.0]);
     }
 
     #[test]
