@@ -30,7 +30,7 @@ pub use percepts::{
 use crate::frame::Frame;
 use crate::geometry::angle::angle_distance;
 use crate::geometry::{Camera, CameraIntrinsics, CameraPose, FieldModel, FieldPose, PoseSigma, Symmetry};
-use optimise::{Observation, PostBearings, Prior, fit};
+use optimise::{Observation, PostBearing, PostBearings, Prior, fit};
 use search::{Region, SearchMap};
 
 /// Fewest line points a burst needs for refinement.
@@ -438,8 +438,11 @@ impl LineRefiner {
             ),
             camera_sigma: camera.sigma,
         };
-        let seen: Vec<f64> =
-            frames.iter().flat_map(|frame| frame.posts.iter().map(PostPoint::bearing)).collect();
+        let seen: Vec<PostBearing> = frames
+            .iter()
+            .flat_map(|frame| frame.posts.iter())
+            .map(|post| PostBearing { bearing: post.bearing(), calibration_rates: post.bearing_rates })
+            .collect();
         let posts = PostBearings { field: &self.posts, seen: &seen };
         let fitted = fit(&self.map, fit_points, &posts, &prior, self.correct_camera);
         let inlier_share = self.inlier_share(observations, &fitted.pose, &fitted.calibration);

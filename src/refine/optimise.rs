@@ -3,8 +3,8 @@
 //! prior (Gaussian near it, Cauchy far from it). The fit also estimates a small correction of the
 //! camera's pitch and roll (a robot's calibration error, which bends every ground point the same way),
 //! held to zero by a prior. Goal posts seen in the image add their bearings (the foot's column is
-//! sharp where its row is not), each to the field post nearest in bearing: they place the robot along
-//! the lines it sees. The covariance comes from the final normal equations.
+//! sharp where its row is not, and the camera correction turns them as it moves the points), each to
+//! the field post nearest in bearing: they place the robot along the lines it sees. The covariance comes from the final normal equations.
 
 use std::ops::AddAssign;
 
@@ -83,38 +83,57 @@ impl Observation {
     }
 }
 
+/// A goal post's bearing as the optimiser sees it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PostBearing {
+    /// Robot-frame bearing of its foot, radians (counter-clockwise from straight ahead).
+    pub bearing: f64,
+    /// How the bearing moves per radian of camera pitch and of roll (a calibration error).
+    pub calibration_rates: Vector2<f64>,
+}
+
+impl PostBearing {
+    /// The bearing with a camera correction of (pitch, roll) radians.
+    pub fn corrected(&self, calibration: &Vector2<f64>) -> f64 {
+        self.bearing + self.calibration_rates.dot(calibration)
+    }
+}
+
 /// Goal posts as the optimiser sees them: where they stand and where they were seen.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct PostBearings<'a> {
     /// The field's posts, field frame, metres.
     pub field: &'a [Point2<f64>],
-    /// Robot-frame bearings at which posts were seen, radians.
-    pub seen: &'a [f64],
+    /// The posts seen.
+    pub seen: &'a [PostBearing],
 }
 
 impl PostBearings<'_> {
-    /// Each seen post's residual from the field post nearest in bearing under `pose`, radians, and
-    /// the residual's derivatives by (x, y, heading).
-    fn residuals(&self, pose: &Vector3<f64>) -> impl Iterator<Item = (f64, Vector3<f64>)> + '_ {
-        let (x, y, heading) = (pose.x, pose.y, pose.z);
-        self.seen.iter().filter_map(move |&seen| {
+    /// Each seen post's residual from the field post nearest in bearing under `state`'s pose and
+    /// camera correction, radians, and the residual's derivatives by the state.
+    fn residuals(&self, state: &State) -> impl Iterator<Item = (f64, State)> + '_ {
+        let (x, y, heading) = (state[0], state[1], state[2]);
+        let calibration = state.fixed_rows::<2>(3).into_owned();
+        self.seen.iter().filter_map(move |seen| {
+            let bearing = seen.corrected(&calibration);
+            let [pitch_rate, roll_rate] = [-seen.calibration_rates.x, -seen.calibration_rates.y];
             self.field
                 .iter()
                 .filter_map(|post| {
                     let (dx, dy) = (post.x - x, post.y - y);
                     let squared = dx * dx + dy * dy;
                     (squared >= MIN_POST_DISTANCE * MIN_POST_DISTANCE).then(|| {
-                        let residual = normalize_angle(dy.atan2(dx) - heading - seen);
-                        (residual, Vector3::new(dy / squared, -dx / squared, -1.0))
+                        let residual = normalize_angle(dy.atan2(dx) - heading - bearing);
+                        (residual, State::new(dy / squared, -dx / squared, -1.0, pitch_rate, roll_rate))
                     })
                 })
                 .min_by(|a, b| a.0.abs().total_cmp(&b.0.abs()))
         })
     }
 
-    /// The posts' robust cost under `pose`.
-    fn cost(&self, pose: &Vector3<f64>) -> f64 {
-        self.residuals(pose).map(|(residual, _)| cauchy(residual / POST_BEARING_SIGMA)).sum()
+    /// The posts' robust cost at `state`.
+    fn cost(&self, state: &State) -> f64 {
+        self.residuals(state).map(|(residual, _)| cauchy(residual / POST_BEARING_SIGMA)).sum()
     }
 }
 
@@ -209,7 +228,8 @@ fn coarse_cost(
     limit: Option<f64>,
 ) -> Option<f64> {
     let place = to_field(*pose);
-    let prior_cost = prior_loss(prior_residual(pose, prior).norm_squared()) + posts.cost(pose);
+    let state = State::new(pose.x, pose.y, pose.z, 0.0, 0.0);
+    let prior_cost = prior_loss(prior_residual(pose, prior).norm_squared()) + posts.cost(&state);
     let scale = stride as f64;
     let mut lines = 0.0;
     for observation in observations.iter().step_by(stride) {
@@ -313,15 +333,16 @@ fn linearise(
     }
     line_information.fixed_view_mut::<3, 3>(0, 0).add_assign(&pose_information);
     let mut hessian = line_information;
-    for (residual, derivatives) in posts.residuals(&pose) {
+    for (residual, derivatives) in posts.residuals(state) {
         let error = residual / POST_BEARING_SIGMA;
         let ratio_squared = (error / CAUCHY_SCALE).powi(2);
         cost += cauchy_loss(ratio_squared, CAUCHY_SCALE);
-        let jacobian = derivatives / POST_BEARING_SIGMA;
-        hessian
-            .fixed_view_mut::<3, 3>(0, 0)
-            .add_assign(cauchy_weight(ratio_squared) * jacobian * jacobian.transpose());
-        pose_gradient += cauchy_weight(ratio_squared) * error * jacobian;
+        let mut jacobian = derivatives / POST_BEARING_SIGMA;
+        if !calibrate {
+            jacobian.fixed_rows_mut::<2>(3).fill(0.0);
+        }
+        hessian += cauchy_weight(ratio_squared) * jacobian * jacobian.transpose();
+        gradient += cauchy_weight(ratio_squared) * error * jacobian;
     }
     gradient.fixed_rows_mut::<3>(0).add_assign(&pose_gradient);
     let sigma = state_sigma(prior);
@@ -606,7 +627,8 @@ mod tests {
         let (truth, observations, prior) = touchline_view(&field);
         let seen = truth.field_to_robot(field.goals[1].posts[0]);
         let field_posts: Vec<Point2<f64>> = field.goal_posts().collect();
-        let posts = PostBearings { field: &field_posts, seen: &[seen.y.atan2(seen.x)] };
+        let seen = [PostBearing { bearing: seen.y.atan2(seen.x), calibration_rates: Vector2::zeros() }];
+        let posts = PostBearings { field: &field_posts, seen: &seen };
         let fit = fit(&map, &observations, &posts, &prior, true);
         assert!(fit.pose.distance_to(&truth) < 0.02, "{:?}", fit.pose);
         assert_abs_diff_eq!(fit.pose.heading(), truth.heading(), epsilon = 0.005);
@@ -615,9 +637,37 @@ mod tests {
         // The post sharpens the pose, but it is not the lines' evidence.
         assert!(fit.line_information[(0, 0)] < 1e-6 * fit.line_information[(1, 1)]);
         // A bearing far from every post's is one loose observation, not a pull.
-        let astray = PostBearings { field: &field_posts, seen: &[1.2] };
+        let astray = [PostBearing { bearing: 1.2, calibration_rates: Vector2::zeros() }];
+        let astray = PostBearings { field: &field_posts, seen: &astray };
         let fit = super::fit(&map, &observations, &astray, &prior, true);
         assert_abs_diff_eq!(fit.pose.x(), 1.4, epsilon = 0.05);
+    }
+
+    #[test]
+    fn a_post_s_bearing_moves_with_the_camera_correction_and_its_derivatives_hold() {
+        let field = FieldModel::default();
+        let field_posts: Vec<Point2<f64>> = field.goal_posts().collect();
+        let truth = FieldPose::new(1.2, 1.0, 0.3).unwrap();
+        let seen = truth.field_to_robot(field.goals[1].posts[0]);
+        // Seen through a camera 0.6° off in roll, which turns this bearing by rate × error.
+        let (rates, error) = (Vector2::new(0.05, -0.4), Vector2::new(0.0, 0.6_f64.to_radians()));
+        let post =
+            PostBearing { bearing: seen.y.atan2(seen.x) - rates.dot(&error), calibration_rates: rates };
+        let posts = PostBearings { field: &field_posts, seen: std::slice::from_ref(&post) };
+        let at = |calibration: &Vector2<f64>| {
+            State::new(truth.x(), truth.y(), truth.heading(), calibration.x, calibration.y)
+        };
+        let residual = |state: &State| posts.residuals(state).next().unwrap();
+        assert_abs_diff_eq!(residual(&at(&error)).0, 0.0, epsilon = 1e-12);
+        assert!(residual(&at(&Vector2::zeros())).0.abs() > 0.003, "uncorrected, the bearing is off");
+        // Every derivative, the camera's too, against a central difference.
+        let state = at(&Vector2::new(0.01, -0.02)) + State::new(0.3, -0.2, 0.1, 0.0, 0.0);
+        let (_, derivatives) = residual(&state);
+        for axis in 0..5 {
+            let step = State::from_fn(|row, _| if row == axis { 1e-6 } else { 0.0 });
+            let numeric = (residual(&(state + step)).0 - residual(&(state - step)).0) / 2e-6;
+            assert_abs_diff_eq!(derivatives[axis], numeric, epsilon = 1e-6);
+        }
     }
 
     #[test]

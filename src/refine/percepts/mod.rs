@@ -31,7 +31,7 @@ use thiserror::Error;
 
 use super::calibration::CameraCalibration;
 use crate::frame::{Frame, rgb_to_yuv};
-use crate::geometry::{Camera, CameraIntrinsics, CameraPose, FieldDimensions, FieldPose};
+use crate::geometry::{Camera, CameraIntrinsics, CameraPose, FieldDimensions, FieldPose, normalize_angle};
 use palette::{Palette, Yuv};
 pub use posts::PostSighting;
 use scan::Crossing;
@@ -208,6 +208,8 @@ pub struct PostPoint {
     pub ground: Point2<f64>,
     /// Where it was seen in the image.
     pub sighting: PostSighting,
+    /// How its bearing moves per radian of camera pitch and per radian of roll (a calibration error).
+    pub bearing_rates: Vector2<f64>,
 }
 
 impl PostPoint {
@@ -673,9 +675,21 @@ pub fn detect(
         .goal_posts(frame)
         .into_iter()
         .filter_map(|sighting| {
-            let ground = camera.ground_point(sighting.foot.x, sighting.foot.y)?;
-            rises_as_a_post(&camera, &ground, &sighting, dimensions.goal_height)
-                .then_some(PostPoint { ground, sighting })
+            let foot = sighting.foot;
+            let ground = camera.ground_point(foot.x, foot.y)?;
+            let bearing = |camera: &Option<Camera>| {
+                let ground = camera.as_ref()?.ground_point(foot.x, foot.y)?;
+                Some(ground.y.atan2(ground.x))
+            };
+            let rate = |(more, less): &(Option<Camera>, Option<Camera>)| {
+                Some(normalize_angle(bearing(more)? - bearing(less)?) / (2.0 * step))
+            };
+            let [pitch, roll] = turns.each_ref().map(|turn| rate(turn).unwrap_or(0.0));
+            rises_as_a_post(&camera, &ground, &sighting, dimensions.goal_height).then_some(PostPoint {
+                ground,
+                sighting,
+                bearing_rates: Vector2::new(pitch, roll),
+            })
         })
         .collect();
     let camera_sigma = CameraCalibration::default().sigma;
@@ -711,6 +725,7 @@ fn ground_width_fits(camera: &Camera, crossing: &LineCrossing, line_width: f64) 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use approx::assert_abs_diff_eq;
     use image::{Rgb, RgbImage};
 
     #[test]
@@ -770,24 +785,26 @@ mod tests {
         assert!(percepts.searched(&Point2::new(326.0, 360.0), 6.0), "below its foot");
     }
 
+    /// Carpet below row 200 and the hall above it, with an upright white bar 10 px wide standing 30 px
+    /// into the carpet at each (left column, top row).
+    fn standing_bars(bars: &[(u32, u32)]) -> Frame {
+        let bars = bars.to_vec();
+        Frame::Rgb(RgbImage::from_fn(640, 480, move |x, y| {
+            let paint =
+                bars.iter().any(|&(left, top)| (left..left + 10).contains(&x) && (top..230).contains(&y));
+            Rgb(if paint {
+                [230, 232, 230]
+            } else if y >= 200 {
+                [60, 130, 50]
+            } else {
+                [40, 40, 45]
+            })
+        }))
+    }
+
     #[test]
     fn a_post_rises_as_a_goal_s_post_would_under_the_camera() {
-        // Carpet below row 200 and the hall above it; upright white bars standing 30 px into the
-        // carpet, each found in the image: a post up to row 60, a robot's leg up to row 170.
-        let bars = |bars: &[(u32, u32)]| {
-            let bars = bars.to_vec();
-            Frame::Rgb(RgbImage::from_fn(640, 480, move |x, y| {
-                let paint =
-                    bars.iter().any(|&(left, top)| (left..left + 10).contains(&x) && (top..230).contains(&y));
-                Rgb(if paint {
-                    [230, 232, 230]
-                } else if y >= 200 {
-                    [60, 130, 50]
-                } else {
-                    [40, 40, 45]
-                })
-            }))
-        };
+        // Two bars, each found in the image: a post up to row 60, a robot's leg up to row 170.
         let kept = |frame: &Frame, camera: &CameraPose, dimensions: &FieldDimensions| -> Vec<f64> {
             assert_eq!(detect_in_image(frame).unwrap().goal_posts(frame).len(), 2, "both stand in the image");
             let percepts = detect(frame, &CameraIntrinsics::nao_top(), camera, dimensions).unwrap();
@@ -796,14 +813,33 @@ mod tests {
         };
         // 3.1 m away under this camera, half a goal's height rises to about row 151.
         let camera = CameraPose::new(0.5, 10.0_f64.to_radians(), 0.0, 0.0).unwrap();
-        let frame = bars(&[(300, 60), (450, 170)]);
+        let frame = standing_bars(&[(300, 60), (450, 170)]);
         assert_eq!(kept(&frame, &camera, &FieldDimensions::default()), vec![300.0]);
         // Looking down at a goal 1.2 m tall 1.1 m away, half its height is above the image: a post
         // must reach the image's top.
         let camera = CameraPose::new(0.5, 25.0_f64.to_radians(), 0.0, 0.0).unwrap();
         let tall = FieldDimensions { goal_height: 1.2, ..FieldDimensions::default() };
-        let frame = bars(&[(300, 0), (450, 20)]);
+        let frame = standing_bars(&[(300, 0), (450, 20)]);
         assert_eq!(kept(&frame, &camera, &tall), vec![300.0]);
+    }
+
+    #[test]
+    fn a_post_s_bearing_rates_are_how_its_bearing_turns_with_the_camera() {
+        // A post off to the side: the camera's pitch and roll turn its bearing.
+        let frame = standing_bars(&[(520, 20)]);
+        let bearing = |pitch: f64, roll: f64| {
+            let camera = CameraPose::new(0.5, (10.0 + pitch).to_radians(), roll.to_radians(), 0.0).unwrap();
+            let percepts = detect(&frame, &CameraIntrinsics::nao_top(), &camera, &FieldDimensions::default());
+            let posts = percepts.unwrap().posts;
+            assert_eq!(posts.len(), 1);
+            (posts[0].bearing(), posts[0].bearing_rates)
+        };
+        let (straight, rates) = bearing(0.0, 0.0);
+        assert!(rates.x.abs() > 0.02 && rates.y.abs() > 0.02, "{rates:?}");
+        for (pitch, roll) in [(0.5, 0.0), (0.0, 0.5), (-0.3, -0.4)] {
+            let expected = straight + rates.dot(&Vector2::new(pitch, roll)) * 1.0_f64.to_radians();
+            assert_abs_diff_eq!(bearing(pitch, roll).0, expected, epsilon = 2e-5);
+        }
     }
 
     #[test]
