@@ -4,7 +4,8 @@
 //! camera's pitch and roll (a robot's calibration error, which bends every ground point the same way),
 //! held to zero by a prior. Goal posts seen in the image add their bearings (the foot's column is
 //! sharp where its row is not, and the camera correction turns them as it moves the points), each to
-//! the field post nearest in bearing: they place the robot along the lines it sees. The covariance comes from the final normal equations.
+//! the field post nearest in bearing: they place the robot along the lines it sees. The covariance
+//! comes from the final normal equations.
 
 use std::ops::AddAssign;
 

@@ -677,6 +677,9 @@ pub fn detect(
         .filter_map(|sighting| {
             let foot = sighting.foot;
             let ground = camera.ground_point(foot.x, foot.y)?;
+            if !rises_as_a_post(&camera, &ground, &sighting, dimensions.goal_height) {
+                return None;
+            }
             let bearing = |camera: &Option<Camera>| {
                 let ground = camera.as_ref()?.ground_point(foot.x, foot.y)?;
                 Some(ground.y.atan2(ground.x))
@@ -684,12 +687,9 @@ pub fn detect(
             let rate = |(more, less): &(Option<Camera>, Option<Camera>)| {
                 Some(normalize_angle(bearing(more)? - bearing(less)?) / (2.0 * step))
             };
+            // A foot a turned camera cannot place gets no rate, as a line point's.
             let [pitch, roll] = turns.each_ref().map(|turn| rate(turn).unwrap_or(0.0));
-            rises_as_a_post(&camera, &ground, &sighting, dimensions.goal_height).then_some(PostPoint {
-                ground,
-                sighting,
-                bearing_rates: Vector2::new(pitch, roll),
-            })
+            Some(PostPoint { ground, sighting, bearing_rates: Vector2::new(pitch, roll) })
         })
         .collect();
     let camera_sigma = CameraCalibration::default().sigma;
