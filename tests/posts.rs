@@ -6,7 +6,7 @@
 use nalgebra::{Point2, Point3};
 use relocd::frame::Frame;
 use relocd::geometry::{Camera, CameraIntrinsics, FieldModel};
-use relocd::refine::{detect, detect_in_image};
+use relocd::refine::detect;
 use relocd::sim::{Randomisation, render};
 
 /// Seed of the frames rendered here by default: never used for training or tuning.
@@ -95,14 +95,10 @@ fn measure(seed: u64, frames: u64, hall_realism: bool) -> (Tally, Tally) {
         let intrinsics = CameraIntrinsics::nao_top();
         let camera = Camera::new(intrinsics, &sampled.pose, &sampled.camera);
         let frame = Frame::Rgb(render(&sampled.scene, &camera, &sampled.settings));
+        let percepts = detect(&frame, &intrinsics, &sampled.camera, field.dimensions()).unwrap();
         let posts: Vec<Point2<f64>> =
-            detect_in_image(&frame).unwrap().goal_posts(&frame).iter().map(|post| post.foot).collect();
-        let on_ground: Vec<Point2<f64>> = detect(&frame, &intrinsics, &sampled.camera, field.dimensions())
-            .unwrap()
-            .posts
-            .iter()
-            .map(|post| post.sighting.foot)
-            .collect();
+            percepts.image().goal_posts(&frame).iter().map(|post| post.foot).collect();
+        let on_ground: Vec<Point2<f64>> = percepts.posts.iter().map(|post| post.sighting.foot).collect();
         let expected = expected_posts(&field, &camera);
         in_image.add(&posts, &expected);
         kept.add(&on_ground, &expected);

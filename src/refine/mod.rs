@@ -441,7 +441,7 @@ impl LineRefiner {
         let seen: Vec<PostBearing> = frames
             .iter()
             .flat_map(|frame| frame.posts.iter())
-            .map(|post| PostBearing { bearing: post.bearing(), calibration_rates: post.bearing_rates })
+            .map(|post| PostBearing { bearing: post.bearing(), calibration_rates: post.bearing_rates() })
             .collect();
         let posts = PostBearings { field: &self.posts, seen: &seen };
         let fitted = fit(&self.map, fit_points, &posts, &prior, self.correct_camera);

@@ -31,7 +31,7 @@ use thiserror::Error;
 
 use super::calibration::CameraCalibration;
 use crate::frame::{Frame, rgb_to_yuv};
-use crate::geometry::{Camera, CameraIntrinsics, CameraPose, FieldDimensions, FieldPose, normalize_angle};
+use crate::geometry::{Camera, CameraIntrinsics, CameraPose, FieldDimensions, FieldPose};
 use palette::{Palette, Yuv};
 pub use posts::PostSighting;
 use scan::Crossing;
@@ -208,14 +208,22 @@ pub struct PostPoint {
     pub ground: Point2<f64>,
     /// Where it was seen in the image.
     pub sighting: PostSighting,
-    /// How its bearing moves per radian of camera pitch and per radian of roll (a calibration error).
-    pub bearing_rates: Vector2<f64>,
+    /// How `ground` moves per radian of camera pitch and per radian of roll (a calibration error).
+    pub calibration_rates: [Vector2<f64>; 2],
 }
 
 impl PostPoint {
     /// Its direction from the robot, radians (counter-clockwise from straight ahead).
     pub fn bearing(&self) -> f64 {
         self.ground.y.atan2(self.ground.x)
+    }
+
+    /// How its bearing moves per radian of camera pitch and per radian of roll: its foot's
+    /// [`PostPoint::calibration_rates`] across the line of sight, over the distance.
+    pub fn bearing_rates(&self) -> Vector2<f64> {
+        let squared = self.ground.coords.norm_squared();
+        let [pitch, roll] = self.calibration_rates.map(|rate| self.ground.coords.perp(&rate) / squared);
+        Vector2::new(pitch, roll)
     }
 }
 
@@ -645,6 +653,17 @@ pub fn detect(
     // The camera turned a little each way in pitch and in roll, for each point's calibration rates.
     let step = CALIBRATION_STEP;
     let turns = [(turned(step, 0.0), turned(-step, 0.0)), (turned(0.0, step), turned(0.0, -step))];
+    // How the ground point under `pixel` moves per radian of pitch and of roll; a pixel a turned camera
+    // cannot place (near the horizon) gets no rate: no correction moves it.
+    let calibration_rates = |pixel: &Point2<f64>| {
+        turns.each_ref().map(|(more, less)| {
+            let moved = |camera: &Option<Camera>| camera.as_ref()?.ground_point(pixel.x, pixel.y);
+            match (moved(more), moved(less)) {
+                (Some(more), Some(less)) => (more - less) / (2.0 * step),
+                _ => Vector2::zeros(),
+            }
+        })
+    };
     let mut points: Vec<LinePoint> = image
         .crossings
         .iter()
@@ -654,17 +673,7 @@ pub fn detect(
             let fits = std::iter::once(&camera)
                 .chain(&tilted)
                 .any(|camera| ground_width_fits(camera, crossing, line_width));
-            if !fits {
-                return None;
-            }
-            let rate = |(more, less): &(Option<Camera>, Option<Camera>)| {
-                let more = more.as_ref()?.ground_point(centre.x, centre.y)?;
-                let less = less.as_ref()?.ground_point(centre.x, centre.y)?;
-                Some((more - less) / (2.0 * step))
-            };
-            // A point a turned camera cannot place (near the horizon) gets no rate: no correction moves it.
-            let calibration_rates = turns.each_ref().map(|turn| rate(turn).unwrap_or_else(Vector2::zeros));
-            Some(LinePoint { ground, pixel: centre, calibration_rates })
+            fits.then(|| LinePoint { ground, pixel: centre, calibration_rates: calibration_rates(&centre) })
         })
         .collect();
     if points.len() > MAX_POINTS {
@@ -675,21 +684,12 @@ pub fn detect(
         .goal_posts(frame)
         .into_iter()
         .filter_map(|sighting| {
-            let foot = sighting.foot;
-            let ground = camera.ground_point(foot.x, foot.y)?;
-            if !rises_as_a_post(&camera, &ground, &sighting, dimensions.goal_height) {
-                return None;
-            }
-            let bearing = |camera: &Option<Camera>| {
-                let ground = camera.as_ref()?.ground_point(foot.x, foot.y)?;
-                Some(ground.y.atan2(ground.x))
-            };
-            let rate = |(more, less): &(Option<Camera>, Option<Camera>)| {
-                Some(normalize_angle(bearing(more)? - bearing(less)?) / (2.0 * step))
-            };
-            // A foot a turned camera cannot place gets no rate, as a line point's.
-            let [pitch, roll] = turns.each_ref().map(|turn| rate(turn).unwrap_or(0.0));
-            Some(PostPoint { ground, sighting, bearing_rates: Vector2::new(pitch, roll) })
+            let ground = camera.ground_point(sighting.foot.x, sighting.foot.y)?;
+            rises_as_a_post(&camera, &ground, &sighting, dimensions.goal_height).then(|| PostPoint {
+                ground,
+                sighting,
+                calibration_rates: calibration_rates(&sighting.foot),
+            })
         })
         .collect();
     let camera_sigma = CameraCalibration::default().sigma;
@@ -806,8 +806,8 @@ mod tests {
     fn a_post_rises_as_a_goal_s_post_would_under_the_camera() {
         // Two bars, each found in the image: a post up to row 60, a robot's leg up to row 170.
         let kept = |frame: &Frame, camera: &CameraPose, dimensions: &FieldDimensions| -> Vec<f64> {
-            assert_eq!(detect_in_image(frame).unwrap().goal_posts(frame).len(), 2, "both stand in the image");
             let percepts = detect(frame, &CameraIntrinsics::nao_top(), camera, dimensions).unwrap();
+            assert_eq!(percepts.image().goal_posts(frame).len(), 2, "both stand in the image");
             // Each kept post by the bar it stands for (its left edge).
             percepts.posts.iter().map(|post| (post.sighting.foot.x / 50.0).floor() * 50.0).collect()
         };
@@ -832,7 +832,7 @@ mod tests {
             let percepts = detect(&frame, &CameraIntrinsics::nao_top(), &camera, &FieldDimensions::default());
             let posts = percepts.unwrap().posts;
             assert_eq!(posts.len(), 1);
-            (posts[0].bearing(), posts[0].bearing_rates)
+            (posts[0].bearing(), posts[0].bearing_rates())
         };
         let (straight, rates) = bearing(0.0, 0.0);
         assert!(rates.x.abs() > 0.02 && rates.y.abs() > 0.02, "{rates:?}");
