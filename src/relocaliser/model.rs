@@ -1,5 +1,7 @@
 //! Loading and running an ONNX relocaliser: with tract (built in), or with ONNX Runtime (cargo feature
-//! `onnxruntime`). tract stays inside this file.
+//! `onnxruntime`). tract stays inside this file and its one op of relocd's own, [`max_pool`].
+
+mod max_pool;
 
 use std::fmt;
 use std::path::Path;
@@ -212,6 +214,7 @@ impl Model {
                     model
                         .with_input_fact(0, f32::fact(&shape).into())
                         .and_then(|model| model.into_optimized())
+                        .and_then(max_pool::pool_in_two_passes)
                         .and_then(|model| model.into_runnable())
                 })
                 .map_err(|error| {
