@@ -1,11 +1,12 @@
 //! Max pooling for the Atom. tract's `OptMaxPool` folds a 3×3 window of stride 2 one tap at a time,
 //! about 110 instructions per output on the Atom path, a sixth of an inference of the built-in
-//! network (BENCHMARKS.md, "Max pooling in two passes"). [`StridedMaxPool`] pools the same windows in
-//! two passes over each channel plane, the maxima of three neighbours along each input row at stride
-//! 2, then of three rows, four outputs at a time with SSE where the target has it. It picks the value
-//! tract picks, bit for bit: the same comparison, in the same order of taps. Upstream, the same
-//! two passes would be a sibling of tract-core's `try_nchw_2x2_f32` fast path in `OptMaxPool`;
-//! tract-core is not vendored here, so the op replaces tract's after optimisation.
+//! network (BENCHMARKS.md, "Max pooling in two passes, and two steps per turn of the kernel loop").
+//! [`StridedMaxPool`] pools the same windows in two passes over each channel plane, the maxima of
+//! three neighbours along each input row at stride 2, then of three rows, four outputs at a time with
+//! SSE where the target has it. It picks the value tract picks, bit for bit: the same comparison, in
+//! the same order of taps. Upstream, the same two passes would be a sibling of tract-core's
+//! `try_nchw_2x2_f32` fast path in `OptMaxPool`; tract-core is not vendored here, so the op replaces
+//! tract's after optimisation.
 
 use tract_onnx::prelude::*;
 use tract_onnx::tract_core::internal::{EvalContext, EvalOp, Op, StaticName, TypedOp, bail};
