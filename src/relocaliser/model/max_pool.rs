@@ -39,7 +39,8 @@ pub(super) struct StridedMaxPool {
 }
 
 impl StridedMaxPool {
-    /// The two-pass pool for `pool` over `input`, or `None` where it does not cover it.
+    /// The two-pass pool for `pool` over `input`, or `None` where it does not cover it (another type,
+    /// layout or window, or an empty plane in or out).
     fn replacing(pool: &OptMaxPool, input: &TypedFact) -> TractResult<Option<Self>> {
         let spec = &pool.pool_spec;
         let Some(shape) = input.shape.as_concrete() else { return Ok(None) };
@@ -47,6 +48,7 @@ impl StridedMaxPool {
             && pool.with_index_outputs.is_none()
             && spec.data_format == DataFormat::NCHW
             && shape.len() == 4
+            && !shape.contains(&0)
             && spec.kernel_shape[..] == [3, 3]
             && spec.strides()[..] == [2, 2]
             && spec.dilations()[..] == [1, 1];
@@ -55,6 +57,9 @@ impl StridedMaxPool {
         }
         let geometry = pool.geometry.to_concrete(shape)?;
         let patch = &geometry.patch;
+        if patch.output_shape.contains(&0) {
+            return Ok(None);
+        }
         let plane = PlaneGeometry {
             height: shape[2],
             width: shape[3],
