@@ -32,8 +32,8 @@ pub(super) fn pool_in_two_passes(mut model: TypedModel) -> TractResult<TypedMode
 /// covers, in two passes.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub(super) struct StridedMaxPool {
-    /// The input's shape, `[n, c, height, width]`.
-    input_shape: [usize; 4],
+    /// The input's planes: `[n, c]` of them, each of the plane's `height` × `width`.
+    planes: [usize; 2],
     /// The windows' placement on each plane.
     plane: PlaneGeometry,
 }
@@ -68,11 +68,15 @@ impl StridedMaxPool {
             pad_top: patch.pad_before[0],
             pad_left: patch.pad_before[1],
         };
-        Ok(Some(Self { input_shape: [shape[0], shape[1], shape[2], shape[3]], plane }))
+        Ok(Some(Self { planes: [shape[0], shape[1]], plane }))
+    }
+
+    fn input_shape(&self) -> [usize; 4] {
+        [self.planes[0], self.planes[1], self.plane.height, self.plane.width]
     }
 
     fn output_shape(&self) -> [usize; 4] {
-        [self.input_shape[0], self.input_shape[1], self.plane.out_height, self.plane.out_width]
+        [self.planes[0], self.planes[1], self.plane.out_height, self.plane.out_width]
     }
 }
 
@@ -89,8 +93,8 @@ impl EvalOp for StridedMaxPool {
 
     fn eval(&self, _context: &EvalContext, inputs: TVec<TValue>) -> TractResult<TVec<TValue>> {
         let [input] = &inputs[..] else { bail!("StridedMaxPool takes one input, got {}", inputs.len()) };
-        if input.shape() != self.input_shape {
-            bail!("StridedMaxPool was built for {:?}, got {:?}", self.input_shape, input.shape());
+        if input.shape() != self.input_shape() {
+            bail!("StridedMaxPool was built for {:?}, got {:?}", self.input_shape(), input.shape());
         }
         let mut output = Tensor::zero::<f32>(&self.output_shape())?;
         self.plane.pool_planes(
