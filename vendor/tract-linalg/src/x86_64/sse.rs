@@ -33,8 +33,75 @@ pub(crate) unsafe fn sse_kernel_f32<const MR: usize, const NR: usize, const NV: 
                 store_rows(ab, &tile);
                 true
             }
+            FusedKerSpec::Store(tile)
+                if MR == 8 && NR == 4 && tile.item_size == 4 && tile.row_byte_stride == 4 =>
+            {
+                store_columns_8x4(&*(ab as *const _ as *const [[f32; 4]; 8]), &tile);
+                true
+            }
+            FusedKerSpec::PerRowAdd(bias) if NR % 4 == 0 => {
+                per_row_add(ab, bias);
+                true
+            }
+            FusedKerSpec::PerColAdd(bias) if NR == 4 => {
+                per_col_add(&mut *(ab as *mut _ as *mut [[f32; 4]; MR]), bias);
+                true
+            }
             _ => false,
         })
+    }
+}
+
+/// `ab[r][c] = bias[r] + ab[r][c]` (the generic `PerRowAdd`, operands in its order), four
+/// columns at a time.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+unsafe fn per_row_add<const MR: usize, const NR: usize>(
+    ab: &mut [[f32; NR]; MR],
+    bias: *const f32,
+) {
+    use std::arch::x86_64::*;
+    for (r, row) in ab.iter_mut().enumerate() {
+        for quad in row.chunks_exact_mut(4) {
+            unsafe {
+                let sum = _mm_add_ps(_mm_set1_ps(*bias.add(r)), _mm_loadu_ps(quad.as_ptr()));
+                _mm_storeu_ps(quad.as_mut_ptr(), sum);
+            }
+        }
+    }
+}
+
+/// `ab[r][c] = bias[c] + ab[r][c]` (the generic `PerColAdd`, operands in its order), a row at a
+/// time.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+unsafe fn per_col_add<const MR: usize>(ab: &mut [[f32; 4]; MR], bias: *const f32) {
+    use std::arch::x86_64::*;
+    unsafe {
+        let bias = _mm_loadu_ps(bias);
+        for row in ab.iter_mut() {
+            _mm_storeu_ps(row.as_mut_ptr(), _mm_add_ps(bias, _mm_loadu_ps(row.as_ptr())));
+        }
+    }
+}
+
+/// Stores an 8x4 tile whose columns are contiguous in C (a product tract computes transposed, so
+/// that C's rows are the tile's columns): the tile transposed in registers, then each column's
+/// eight values in two stores; the generic store goes element by element.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+unsafe fn store_columns_8x4(ab: &[[f32; 4]; 8], tile: &crate::frame::mmm::OutputStoreKer) {
+    use std::arch::x86_64::*;
+    unsafe {
+        for half in 0..2 {
+            let row = |r: usize| _mm_loadu_ps(ab[4 * half + r].as_ptr());
+            let (mut r0, mut r1, mut r2, mut r3) = (row(0), row(1), row(2), row(3));
+            _MM_TRANSPOSE4_PS(&mut r0, &mut r1, &mut r2, &mut r3);
+            for (c, column) in [r0, r1, r2, r3].into_iter().enumerate() {
+                let dst = tile.ptr.offset(tile.col_byte_stride * c as isize) as *mut f32;
+                _mm_storeu_ps(dst.add(4 * half), column);
+            }
+        }
     }
 }
 
