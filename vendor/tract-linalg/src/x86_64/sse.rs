@@ -24,6 +24,9 @@ pub(crate) unsafe fn sse_kernel_f32<const MR: usize, const NR: usize, const NV: 
     pnl: *const FusedKerSpec<f32>,
 ) -> isize {
     unsafe {
+        if MR == 8 && NR == 4 && !pnl.is_null() && common_tile_8x4(pnl) {
+            return 0;
+        }
         crate::generic::mmm::fused_ops::<f32, MR, NR>(pnl, |ab, spec| match *spec {
             FusedKerSpec::AddMatMul { k, pa, pb, packing: 0 } => {
                 add_mat_mul_f32::<MR, NR, NV>(ab, k, pa as *const f32, pb as *const f32);
@@ -36,7 +39,8 @@ pub(crate) unsafe fn sse_kernel_f32<const MR: usize, const NR: usize, const NV: 
             FusedKerSpec::Store(tile)
                 if MR == 8 && NR == 4 && tile.item_size == 4 && tile.row_byte_stride == 4 =>
             {
-                store_columns_8x4(&*(ab as *const _ as *const [[f32; 4]; 8]), &tile);
+                let ab = &*(ab as *const _ as *const [[f32; 4]; 8]);
+                store_columns_8x4(ab.map(|row| std::arch::x86_64::_mm_loadu_ps(row.as_ptr())), &tile);
                 true
             }
             FusedKerSpec::PerRowAdd(bias) if NR % 4 == 0 => {
@@ -85,23 +89,101 @@ unsafe fn per_col_add<const MR: usize>(ab: &mut [[f32; 4]; MR], bias: *const f32
     }
 }
 
-/// Stores an 8x4 tile whose columns are contiguous in C (a product tract computes transposed, so
-/// that C's rows are the tile's columns): the tile transposed in registers, then each column's
-/// eight values in two stores; the generic store goes element by element.
+/// Stores an 8x4 tile, a register per row, whose columns are contiguous in C (a product tract
+/// computes transposed, so that C's rows are the tile's columns): two 4x4 transposes in registers,
+/// then each column's eight values in two stores; the generic store goes element by element.
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
-unsafe fn store_columns_8x4(ab: &[[f32; 4]; 8], tile: &crate::frame::mmm::OutputStoreKer) {
+unsafe fn store_columns_8x4(
+    rows: [std::arch::x86_64::__m128; 8],
+    tile: &crate::frame::mmm::OutputStoreKer,
+) {
     use std::arch::x86_64::*;
     unsafe {
         for half in 0..2 {
-            let row = |r: usize| _mm_loadu_ps(ab[4 * half + r].as_ptr());
-            let (mut r0, mut r1, mut r2, mut r3) = (row(0), row(1), row(2), row(3));
+            let quad = &rows[4 * half..];
+            let (mut r0, mut r1, mut r2, mut r3) = (quad[0], quad[1], quad[2], quad[3]);
             _MM_TRANSPOSE4_PS(&mut r0, &mut r1, &mut r2, &mut r3);
             for (c, column) in [r0, r1, r2, r3].into_iter().enumerate() {
                 let dst = tile.ptr.offset(tile.col_byte_stride * c as isize) as *mut f32;
                 _mm_storeu_ps(dst.add(4 * half), column);
             }
         }
+    }
+}
+
+/// Runs the 8x4 tile most of a convolution's tiles are, with the tile in registers from the first
+/// product to the store: `Clear`, `AddMatMul` (packing 0, the assembly loop's conditions), a bias
+/// (`PerRowAdd` or `PerColAdd`) or none, `ScalarMax` (a ReLU) or none, a `Store` of rows or of
+/// columns, `Done`. The operations are the generic ones, in their order, so the results are the
+/// same bit for bit; what goes is the tile's round trips through memory between the ops and their
+/// dispatch (~100 instructions per tile). Answers false, having touched nothing, for any other list.
+#[cfg(target_arch = "x86_64")]
+unsafe fn common_tile_8x4(pnl: *const FusedKerSpec<f32>) -> bool {
+    use std::arch::x86_64::*;
+    use FusedKerSpec::*;
+    unsafe {
+        let mut op = pnl;
+        let mut next = || {
+            let spec = *op;
+            op = op.add(1);
+            spec
+        };
+        if !matches!(next(), Clear) {
+            return false;
+        }
+        let AddMatMul { k, pa, pb, packing: 0 } = next() else { return false };
+        if k == 0 || (pa as usize) % 16 != 0 {
+            return false;
+        }
+        let mut spec = next();
+        let bias = match spec {
+            PerRowAdd(_) | PerColAdd(_) => Some(std::mem::replace(&mut spec, next())),
+            _ => None,
+        };
+        let relu = match spec {
+            ScalarMax(floor) => {
+                spec = next();
+                Some(floor)
+            }
+            _ => None,
+        };
+        let Store(tile) = spec else { return false };
+        let (rows, columns) = (tile.col_byte_stride == 4, tile.row_byte_stride == 4);
+        if tile.item_size != 4 || !(rows || columns) || !matches!(next(), Done) {
+            return false;
+        }
+        let mut acc = [_mm_setzero_ps(); 8];
+        loop_8x4(&mut acc, k, pa as *const f32, pb as *const f32);
+        match bias {
+            Some(PerRowAdd(bias)) => {
+                for (r, acc) in acc.iter_mut().enumerate() {
+                    *acc = _mm_add_ps(_mm_set1_ps(*bias.add(r)), *acc);
+                }
+            }
+            Some(PerColAdd(bias)) => {
+                let bias = _mm_loadu_ps(bias);
+                for acc in acc.iter_mut() {
+                    *acc = _mm_add_ps(bias, *acc);
+                }
+            }
+            _ => {}
+        }
+        if let Some(floor) = relu {
+            // The generic `if floor > x { floor } else { x }`, which is what `maxps(floor, x)` does.
+            let floor = _mm_set1_ps(floor);
+            for acc in acc.iter_mut() {
+                *acc = _mm_max_ps(floor, *acc);
+            }
+        }
+        if rows {
+            for (r, acc) in acc.iter().enumerate() {
+                _mm_storeu_ps(tile.ptr.offset(tile.row_byte_stride * r as isize) as *mut f32, *acc);
+            }
+        } else {
+            store_columns_8x4(acc, &tile);
+        }
+        true
     }
 }
 
@@ -489,6 +571,96 @@ mod tests {
         let sse2 = IsaSet::of_arch(Arch::X86_64);
         assert!(picked(sse2, DatumType::F32, 64, 576, 4800).starts_with("generic"));
         assert!(picked(sse2, DatumType::I32, 64, 576, 4800).starts_with("generic"));
+    }
+
+    /// The register-only path for a convolution's common tile gives what the generic ops give, bit
+    /// for bit, for every mix of bias, ReLU and store it takes, odd and even `k`, and values with
+    /// NaN and both zeros (which a ReLU must leave as the generic code does).
+    #[test]
+    fn common_tile_matches_the_generic_ops() {
+        use crate::frame::mmm::{FusedKerSpec, OutputStoreKer};
+        let mut seed = 22u32;
+        let mut value = move || {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            match seed >> 28 {
+                0 => f32::NAN,
+                1 => -0.0,
+                2 => 0.0,
+                _ => (seed >> 8) as f32 / (1 << 23) as f32 - 1.0,
+            }
+        };
+        // 16-byte aligned panels, as tract packs them: A 8 values per step of k, B 4.
+        #[repr(align(16))]
+        #[derive(Clone, Copy)]
+        struct Quad([f32; 4]);
+        let mut a_panel = vec![Quad([0.0; 4]); 2 * 13];
+        let mut b_panel = vec![Quad([0.0; 4]); 13];
+        a_panel.iter_mut().chain(b_panel.iter_mut()).flat_map(|q| &mut q.0).for_each(|v| *v = value());
+        let (rows_bias, cols_bias) = ([0; 8].map(|_| value()), [0; 4].map(|_| value()));
+        for k in [1, 2, 3, 8, 13] {
+            for bias in 0..3 {
+                for relu in [None, Some(0.0f32), Some(-0.5)] {
+                    for by_columns in [false, true] {
+                        // C with padding between rows (or columns), so the strides are used.
+                        let (row_stride, col_stride) = if by_columns { (4, 4 * 11) } else { (4 * 6, 4) };
+                        let store = |c: &mut Vec<f32>| OutputStoreKer {
+                            ptr: c.as_mut_ptr() as *mut u8,
+                            row_byte_stride: row_stride,
+                            col_byte_stride: col_stride,
+                            item_size: 4,
+                        };
+                        let (mut ours, mut generic) = (vec![7f32; 64], vec![7f32; 64]);
+                        let ops = |c: &mut Vec<f32>| {
+                            let mut ops = vec![
+                                FusedKerSpec::Clear,
+                                FusedKerSpec::AddMatMul {
+                                    k,
+                                    pa: a_panel.as_ptr() as *const u8,
+                                    pb: b_panel.as_ptr() as *const u8,
+                                    packing: 0,
+                                },
+                            ];
+                            match bias {
+                                1 => ops.push(FusedKerSpec::PerRowAdd(rows_bias.as_ptr())),
+                                2 => ops.push(FusedKerSpec::PerColAdd(cols_bias.as_ptr())),
+                                _ => {}
+                            }
+                            ops.extend(relu.map(FusedKerSpec::ScalarMax));
+                            ops.extend([FusedKerSpec::Store(store(c)), FusedKerSpec::Done]);
+                            ops
+                        };
+                        let case = format!("k {k}, bias {bias}, relu {relu:?}, by columns {by_columns}");
+                        unsafe {
+                            assert!(super::common_tile_8x4(ops(&mut ours).as_ptr()), "{case}");
+                            crate::generic::mmm::fused_ops::<f32, 8, 4>(ops(&mut generic).as_ptr(), |_, _| false);
+                        }
+                        let bits = |c: &[f32]| c.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+                        assert_eq!(bits(&ours), bits(&generic), "{case}");
+                    }
+                }
+            }
+        }
+    }
+
+    /// The tiles the register-only path does not take are left to the general one untouched.
+    #[test]
+    fn common_tile_declines_other_lists() {
+        use crate::frame::mmm::FusedKerSpec;
+        let panel = [[0f32; 4]; 4];
+        let add_mat_mul = |k| FusedKerSpec::AddMatMul {
+            k,
+            pa: panel.as_ptr() as *const u8,
+            pb: panel.as_ptr() as *const u8,
+            packing: 0,
+        };
+        for ops in [
+            vec![add_mat_mul(1), FusedKerSpec::Done],
+            vec![FusedKerSpec::Clear, add_mat_mul(0), FusedKerSpec::Done],
+            vec![FusedKerSpec::Clear, add_mat_mul(1), FusedKerSpec::ScalarMin(0.0), FusedKerSpec::Done],
+            vec![FusedKerSpec::Clear, add_mat_mul(1), FusedKerSpec::Done],
+        ] {
+            assert!(!unsafe { super::common_tile_8x4(ops.as_ptr()) }, "{ops:?}");
+        }
     }
 
     /// The vector re-quantisation is the scalar one, bit for bit, over the whole i32 range.
