@@ -3,11 +3,13 @@
 //!
 //! Every other x86_64 kernel needs AVX, so such a CPU used to run the generic Rust kernels: a 4x4
 //! tile the compiler vectorises only partly. These keep the generic kernels' tile in memory
-//! (`ab[row][col]`, so every fused op other than the product itself is the generic code, through
-//! [`crate::generic::mmm::fused_ops`]) and replace only the `AddMatMul` loop, which is where the
+//! (`ab[row][col]`, so a fused op they do not replace is the generic code, through
+//! [`crate::generic::mmm::fused_ops`]) and replace the `AddMatMul` loop, which is where the
 //! time goes: the tile is loaded into xmm registers once per product, one register per 4 columns
 //! of a row, and every step of `k` is a broadcast, a `mulps` and an `addps` per register (the i32
-//! kernel: a `pmaddwd` per row for two steps of `k`). SSE2 is baseline on x86_64 and is all the
+//! kernel: a `pmaddwd` per row for two steps of `k`), and the few other ops that showed in the
+//! Atom's profile; the f32 kernel runs a convolution's usual tile (product, bias, ReLU, store) in
+//! registers from start to end (`common_tile_8x4`). SSE2 is baseline on x86_64 and is all the
 //! f32 kernel uses; both are declared as needing SSE4.1 (the i32 kernel's `pmovsxbw`; every Atom
 //! since Silvermont has it) so that one `TRACT_CPU_ISA=-sse4.1` turns the pair off, and they sit
 //! at the bottom of the ladder, under every AVX kernel: they are only chosen where none of those
