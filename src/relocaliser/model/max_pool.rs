@@ -145,8 +145,10 @@ trait Element: Datum + Copy + PartialOrd {
 
     /// Each window's three-column maximum along a padded row: output `x` pools `row[2x..2x + 3]`,
     /// for the `maxima.len()` outputs (a multiple of [`Self::LANES`]); the row holds
-    /// `2 maxima.len() + 2` columns.
-    fn pool_row(row: &[Self], maxima: &mut [Self]);
+    /// `2 maxima.len() + 2` columns. One output at a time unless the type has an SSE pass.
+    fn pool_row(row: &[Self], maxima: &mut [Self]) {
+        pool_row_scalar(row, maxima);
+    }
 }
 
 impl Element for f32 {
@@ -155,11 +157,9 @@ impl Element for f32 {
     const OUTSIDE: f32 = f32::NAN;
     const LANES: usize = 4;
 
+    #[cfg(all(any(target_arch = "x86", target_arch = "x86_64"), target_feature = "sse2"))]
     fn pool_row(row: &[f32], maxima: &mut [f32]) {
-        #[cfg(all(any(target_arch = "x86", target_arch = "x86_64"), target_feature = "sse2"))]
         sse::pool_row_f32(row, maxima);
-        #[cfg(not(all(any(target_arch = "x86", target_arch = "x86_64"), target_feature = "sse2")))]
-        pool_row_scalar(row, maxima);
     }
 }
 
@@ -168,11 +168,9 @@ impl Element for u8 {
     const OUTSIDE: u8 = u8::MIN;
     const LANES: usize = 16;
 
+    #[cfg(all(any(target_arch = "x86", target_arch = "x86_64"), target_feature = "sse2"))]
     fn pool_row(row: &[u8], maxima: &mut [u8]) {
-        #[cfg(all(any(target_arch = "x86", target_arch = "x86_64"), target_feature = "sse2"))]
         sse::pool_row_bytes(row, maxima, 0);
-        #[cfg(not(all(any(target_arch = "x86", target_arch = "x86_64"), target_feature = "sse2")))]
-        pool_row_scalar(row, maxima);
     }
 }
 
@@ -181,21 +179,17 @@ impl Element for i8 {
     const OUTSIDE: i8 = i8::MIN;
     const LANES: usize = 16;
 
+    #[cfg(all(any(target_arch = "x86", target_arch = "x86_64"), target_feature = "sse2"))]
     fn pool_row(row: &[i8], maxima: &mut [i8]) {
-        #[cfg(all(any(target_arch = "x86", target_arch = "x86_64"), target_feature = "sse2"))]
-        {
-            // SAFETY: i8 and u8 have the same size and alignment, and every bit pattern is valid
-            // in both; the bytes' order is kept by flipping their sign bits (0x80).
-            let (row, maxima) = unsafe {
-                (
-                    std::slice::from_raw_parts(row.as_ptr() as *const u8, row.len()),
-                    std::slice::from_raw_parts_mut(maxima.as_mut_ptr() as *mut u8, maxima.len()),
-                )
-            };
-            sse::pool_row_bytes(row, maxima, 0x80);
-        }
-        #[cfg(not(all(any(target_arch = "x86", target_arch = "x86_64"), target_feature = "sse2")))]
-        pool_row_scalar(row, maxima);
+        // SAFETY: i8 and u8 have the same size and alignment, and every bit pattern is valid in
+        // both; the bytes' order is kept by flipping their sign bits (0x80).
+        let (row, maxima) = unsafe {
+            (
+                std::slice::from_raw_parts(row.as_ptr() as *const u8, row.len()),
+                std::slice::from_raw_parts_mut(maxima.as_mut_ptr() as *mut u8, maxima.len()),
+            )
+        };
+        sse::pool_row_bytes(row, maxima, 0x80);
     }
 }
 
@@ -279,8 +273,8 @@ fn fold<T: PartialOrd>(acc: T, tap: T) -> T {
     if acc < tap { tap } else { acc }
 }
 
-/// [`Element::pool_row`] one output at a time, for targets without SSE and as the tests' reference.
-#[cfg(any(test, not(all(any(target_arch = "x86", target_arch = "x86_64"), target_feature = "sse2"))))]
+/// [`Element::pool_row`] one output at a time: what types and targets without an SSE pass use, and the
+/// tests' reference.
 fn pool_row_scalar<T: Element>(row: &[T], maxima: &mut [T]) {
     for (x, maximum) in maxima.iter_mut().enumerate() {
         *maximum = fold(fold(fold(T::LEAST, row[2 * x]), row[2 * x + 1]), row[2 * x + 2]);
