@@ -41,16 +41,15 @@ pub(crate) unsafe fn sse_kernel_f32<const MR: usize, const NR: usize, const NV: 
             FusedKerSpec::Store(tile)
                 if MR == 8 && NR == 4 && tile.item_size == 4 && tile.row_byte_stride == 4 =>
             {
-                let ab = &*(ab as *const _ as *const [[f32; 4]; 8]);
-                store_columns_8x4(ab.map(|row| std::arch::x86_64::_mm_loadu_ps(row.as_ptr())), &tile);
+                store_columns_8x4(load_rows(&*(ab as *const _ as *const [[f32; 4]; 8])), &tile);
                 true
             }
-            FusedKerSpec::PerRowAdd(bias) if NR % 4 == 0 => {
-                per_row_add(ab, bias);
+            FusedKerSpec::PerRowAdd(bias) if MR == 8 && NR == 4 => {
+                in_registers(&mut *(ab as *mut _ as *mut [[f32; 4]; 8]), |rows| add_row_bias(rows, bias));
                 true
             }
-            FusedKerSpec::PerColAdd(bias) if NR == 4 => {
-                per_col_add(&mut *(ab as *mut _ as *mut [[f32; 4]; MR]), bias);
+            FusedKerSpec::PerColAdd(bias) if MR == 8 && NR == 4 => {
+                in_registers(&mut *(ab as *mut _ as *mut [[f32; 4]; 8]), |rows| add_col_bias(rows, bias));
                 true
             }
             _ => false,
@@ -58,35 +57,54 @@ pub(crate) unsafe fn sse_kernel_f32<const MR: usize, const NR: usize, const NV: 
     }
 }
 
-/// `ab[r][c] = bias[r] + ab[r][c]` (the generic `PerRowAdd`, operands in its order), four
-/// columns at a time.
+/// An 8x4 tile held in memory, a register per row.
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
-unsafe fn per_row_add<const MR: usize, const NR: usize>(
-    ab: &mut [[f32; NR]; MR],
-    bias: *const f32,
+unsafe fn load_rows(ab: &[[f32; 4]; 8]) -> [std::arch::x86_64::__m128; 8] {
+    use std::arch::x86_64::*;
+    let mut rows = [unsafe { _mm_setzero_ps() }; 8];
+    for (row, ab) in rows.iter_mut().zip(ab.iter()) {
+        *row = unsafe { _mm_loadu_ps(ab.as_ptr()) };
+    }
+    rows
+}
+
+/// Applies `op` to an 8x4 tile held in memory, a register per row, and stores it back.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+unsafe fn in_registers(
+    ab: &mut [[f32; 4]; 8],
+    op: impl FnOnce(&mut [std::arch::x86_64::__m128; 8]),
 ) {
     use std::arch::x86_64::*;
-    for (r, row) in ab.iter_mut().enumerate() {
-        for quad in row.chunks_exact_mut(4) {
-            unsafe {
-                let sum = _mm_add_ps(_mm_set1_ps(*bias.add(r)), _mm_loadu_ps(quad.as_ptr()));
-                _mm_storeu_ps(quad.as_mut_ptr(), sum);
-            }
+    unsafe {
+        let mut rows = load_rows(ab);
+        op(&mut rows);
+        for (row, ab) in rows.iter().zip(ab.iter_mut()) {
+            _mm_storeu_ps(ab.as_mut_ptr(), *row);
         }
     }
 }
 
-/// `ab[r][c] = bias[c] + ab[r][c]` (the generic `PerColAdd`, operands in its order), a row at a
-/// time.
+/// `row[r] = bias[r] + row[r]` lane by lane, the generic `PerRowAdd` in its operands' order.
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
-unsafe fn per_col_add<const MR: usize>(ab: &mut [[f32; 4]; MR], bias: *const f32) {
+unsafe fn add_row_bias(rows: &mut [std::arch::x86_64::__m128; 8], bias: *const f32) {
+    use std::arch::x86_64::*;
+    for (r, row) in rows.iter_mut().enumerate() {
+        unsafe { *row = _mm_add_ps(_mm_set1_ps(*bias.add(r)), *row) };
+    }
+}
+
+/// `row[r][c] = bias[c] + row[r][c]`, the generic `PerColAdd` in its operands' order.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+unsafe fn add_col_bias(rows: &mut [std::arch::x86_64::__m128; 8], bias: *const f32) {
     use std::arch::x86_64::*;
     unsafe {
         let bias = _mm_loadu_ps(bias);
-        for row in ab.iter_mut() {
-            _mm_storeu_ps(row.as_mut_ptr(), _mm_add_ps(bias, _mm_loadu_ps(row.as_ptr())));
+        for row in rows.iter_mut() {
+            *row = _mm_add_ps(bias, *row);
         }
     }
 }
@@ -158,17 +176,8 @@ unsafe fn common_tile_8x4(pnl: *const FusedKerSpec<f32>) -> bool {
         let mut acc = [_mm_setzero_ps(); 8];
         loop_8x4(&mut acc, k, pa as *const f32, pb as *const f32);
         match bias {
-            Some(PerRowAdd(bias)) => {
-                for (r, acc) in acc.iter_mut().enumerate() {
-                    *acc = _mm_add_ps(_mm_set1_ps(*bias.add(r)), *acc);
-                }
-            }
-            Some(PerColAdd(bias)) => {
-                let bias = _mm_loadu_ps(bias);
-                for acc in acc.iter_mut() {
-                    *acc = _mm_add_ps(bias, *acc);
-                }
-            }
+            Some(PerRowAdd(bias)) => add_row_bias(&mut acc, bias),
+            Some(PerColAdd(bias)) => add_col_bias(&mut acc, bias),
             _ => {}
         }
         if let Some(floor) = relu {
