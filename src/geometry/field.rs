@@ -241,6 +241,16 @@ impl LineSegment {
 
     /// Whether `point` is on the painted line of width `width` (square caps).
     pub fn covers(&self, point: Point2<f64>, width: f64) -> bool {
+        // The paint reaches at most width/√2 beyond the segment on either axis: a point outside the
+        // segment's box grown by the width is off it, without the root and division below.
+        let (low, high) = (self.start.coords.inf(&self.end.coords), self.start.coords.sup(&self.end.coords));
+        if point.x < low.x - width
+            || point.x > high.x + width
+            || point.y < low.y - width
+            || point.y > high.y + width
+        {
+            return false;
+        }
         let direction = self.end - self.start;
         let length = direction.norm();
         let unit = direction / length;
@@ -264,6 +274,16 @@ impl Circle {
     /// Distance from `point` to the circle's centre line.
     pub fn distance_to(&self, point: Point2<f64>) -> f64 {
         ((point - self.centre).norm() - self.radius).abs()
+    }
+
+    /// Whether `point` is on the painted circle of line width `width`.
+    pub fn covers(&self, point: Point2<f64>, width: f64) -> bool {
+        // Outside the circle's box grown by the width, without the root.
+        let reach = self.radius + width;
+        if (point.x - self.centre.x).abs() > reach || (point.y - self.centre.y).abs() > reach {
+            return false;
+        }
+        self.distance_to(point) <= width / 2.0
     }
 }
 
@@ -377,7 +397,7 @@ impl FieldModel {
     pub fn is_painted(&self, point: Point2<f64>) -> bool {
         let width = self.dimensions.line_width;
         self.lines.iter().any(|line| line.covers(point, width))
-            || self.circles.iter().any(|circle| circle.distance_to(point) <= width / 2.0)
+            || self.circles.iter().any(|circle| circle.covers(point, width))
             || self.marks.iter().any(|mark| mark.covers(point, width))
     }
 
@@ -443,6 +463,35 @@ mod tests {
         for carpet in [(1.0, 1.0), (-3.2, 0.1), (4.56, 0.0), (0.8, 0.0), (2.8, 0.5), (0.04, 0.3)] {
             assert!(!field.is_painted(Point2::new(carpet.0, carpet.1)), "{carpet:?}");
         }
+    }
+
+    #[test]
+    fn covering_ends_where_the_paint_ends_for_slanted_lines_and_circles() {
+        // The box checks in front of `covers` must never decide: the painted rectangle's corners and
+        // the circle's outer edge reach the boxes' corners diagonally.
+        let width = 0.05;
+        let slanted = LineSegment { start: Point2::new(0.3, -0.2), end: Point2::new(1.1, 0.4) };
+        let circle = Circle { centre: Point2::new(-0.5, 0.2), radius: 0.75 };
+        let on_rectangle = |point: Point2<f64>| {
+            let unit = (slanted.end - slanted.start).normalize();
+            let offset = point - slanted.start;
+            let (along, across) = (offset.dot(&unit), offset.perp(&unit));
+            across.abs() <= width / 2.0
+                && along >= -width / 2.0
+                && along <= (slanted.end - slanted.start).norm() + width / 2.0
+        };
+        let (mut on_line, mut on_circle) = (0, 0);
+        for i in -400..=400 {
+            for j in -400..=400 {
+                let point = Point2::new(f64::from(i) * 0.004, f64::from(j) * 0.004);
+                assert_eq!(slanted.covers(point, width), on_rectangle(point), "{point}");
+                let on_ring = ((point - circle.centre).norm() - circle.radius).abs() <= width / 2.0;
+                assert_eq!(circle.covers(point, width), on_ring, "{point}");
+                on_line += usize::from(on_rectangle(point));
+                on_circle += usize::from(on_ring);
+            }
+        }
+        assert!(on_line > 1000 && on_circle > 1000, "{on_line} {on_circle}");
     }
 
     #[test]

@@ -305,14 +305,8 @@ fn sphere(ray: &Ray, centre: Point3<f64>, radius: f64) -> Option<(f64, Vector3<f
 }
 
 fn robot_hit(scene: &Scene, ray: &Ray, position: Point2<f64>, jersey: Linear) -> Option<Hit> {
-    // Cheap rejection: the ray's closest approach to the robot's axis.
-    let to_robot = Vector3::new(position.x - ray.origin.x, position.y - ray.origin.y, 0.0);
-    let horizontal = Vector3::new(ray.direction.x, ray.direction.y, 0.0);
-    if horizontal.norm_squared() > EPSILON {
-        let closest = to_robot.cross(&horizontal).norm() / horizontal.norm();
-        if closest > body::TORSO_RADIUS + 0.01 {
-            return None;
-        }
+    if passes_wide_of(ray, position) {
+        return None;
     }
     let mut nearest = None;
     let legs = vertical_cylinder(ray, position, body::LEGS_RADIUS, 0.0, body::LEGS_TOP);
@@ -322,6 +316,23 @@ fn robot_hit(scene: &Scene, ray: &Ray, position: Point2<f64>, jersey: Linear) ->
     let head = sphere(ray, Point3::new(position.x, position.y, body::HEAD_CENTRE), body::HEAD_RADIUS);
     Hit::keep_nearer(&mut nearest, head.map(|(t, normal)| Hit { t, albedo: scene.white, normal }));
     nearest
+}
+
+/// Cheap rejection for a robot standing at `position`: whether the ray stays farther from its axis
+/// than the widest part of its body (with a margin), seen from above: it passes wide of the axis, or
+/// the robot is behind the ray's origin. Squared comparisons, no root. Near-vertical rays are never
+/// rejected.
+fn passes_wide_of(ray: &Ray, position: Point2<f64>) -> bool {
+    let (to_x, to_y) = (position.x - ray.origin.x, position.y - ray.origin.y);
+    let (dx, dy) = (ray.direction.x, ray.direction.y);
+    let horizontal_squared = dx * dx + dy * dy;
+    if horizontal_squared <= EPSILON {
+        return false;
+    }
+    let reach_squared = (body::TORSO_RADIUS + 0.01).powi(2) * horizontal_squared;
+    let across = to_x * dy - to_y * dx;
+    let along = to_x * dx + to_y * dy;
+    across * across > reach_squared || (along < 0.0 && along * along > reach_squared)
 }
 
 fn ball_hit(ray: &Ray, position: Point2<f64>) -> Option<Hit> {
@@ -382,6 +393,41 @@ mod tests {
         scene.surroundings = Surroundings::Asymmetric { seed: 3 };
         let wall = trace(&scene, &ray((0.0, 0.0, 0.5), (1.0, 0.0, 0.1)));
         assert!(wall.iter().any(|channel| *channel > 0.0));
+    }
+
+    #[test]
+    fn rays_passed_over_as_wide_of_a_robot_miss_it() {
+        let scene = Scene::plain(FieldModel::default());
+        let robot = Point2::new(1.0, -0.5);
+        let (mut rejected, mut hits) = (0, 0);
+        for origin in [(0.0, 0.0, 0.5), (1.3, -0.4, 0.45), (2.5, 1.0, 0.05), (1.0, -0.5, 1.0)] {
+            for i in 0..90 {
+                for j in 0..30 {
+                    let azimuth = f64::from(i) * std::f64::consts::TAU / 90.0;
+                    let elevation = f64::from(j - 20) * 0.04;
+                    let ray = ray(origin, (azimuth.cos(), azimuth.sin(), elevation));
+                    let hit = robot_hit(&scene, &ray, robot, [0.5; 3]).is_some();
+                    if passes_wide_of(&ray, robot) {
+                        rejected += 1;
+                        // Without the rejection, the body itself is missed too.
+                        let body = [
+                            vertical_cylinder(&ray, robot, body::LEGS_RADIUS, 0.0, body::LEGS_TOP),
+                            vertical_cylinder(
+                                &ray,
+                                robot,
+                                body::TORSO_RADIUS,
+                                body::LEGS_TOP,
+                                body::TORSO_TOP,
+                            ),
+                            sphere(&ray, Point3::new(robot.x, robot.y, body::HEAD_CENTRE), body::HEAD_RADIUS),
+                        ];
+                        assert!(body.iter().all(Option::is_none), "{origin:?} {azimuth} {elevation}");
+                    }
+                    hits += usize::from(hit);
+                }
+            }
+        }
+        assert!(rejected > 5000 && hits > 50, "{rejected} {hits}");
     }
 
     #[test]
