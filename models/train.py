@@ -7,8 +7,8 @@
 Several training (or validation) recordings are concatenated in the order given.
 
 Devices: on the CPU (the default when no GPU is present) the batch defaults to 64 and the passes run in
-fp32, or with `--precision bf16` in bf16 autocast (about 1.5x the frames per second on a CPU with
-AVX512-BF16 or AMX; slower without). With `--device cuda` (or `auto` when a GPU is present) the frames,
+fp32, or with `--precision bf16` in bf16 autocast (1.4-1.7x the frames per second on a 2-core AMD EPYC with
+AVX512-BF16; CPUs without native bf16 emulate it, which was not measured). With `--device cuda` (or `auto` when a GPU is present) the frames,
 targets and augmentation live on the GPU, the passes run in bf16 autocast, and the batch defaults to
 256; the recipe (loss, augmentation, schedule, seeds) is the same, the random streams are the GPU's.
 
@@ -156,7 +156,7 @@ def train_step(net, optimiser, images, targets, generator, autocast):
     index, train_images = images
     flip = torch.rand(len(index), generator=generator, device=train_images.device) < 0.5
     batch = train_images[index]
-    batch[flip] = batch[flip].flip(2)
+    batch = torch.where(flip[:, None, None, None], batch.flip(2), batch)
     t = torch.where(flip[:, None], targets[1][0][index], targets[0][0][index])
     b = torch.where(flip[:, None], targets[1][1][index], targets[0][1][index])
     x = augment(batch, generator)
@@ -212,7 +212,7 @@ def main():
                         help="cuda: GPU with bf16 autocast and the data on the GPU; auto: cuda when present")
     parser.add_argument("--precision", choices=["auto", "fp32", "bf16"], default="auto",
                         help="forward and backward passes in fp32 or bf16 autocast; auto: bf16 on a GPU, fp32 on "
-                             "the CPU (bf16 pays on CPUs with AVX512-BF16 or AMX)")
+                             "the CPU (bf16 pays on CPUs with native bf16: AVX512-BF16 or AMX)")
     parser.add_argument("--limit", type=int, default=0, help="use only the first N frames of each training recording (0: all)")
     parser.add_argument("--time-budget", type=float, default=0,
                         help="seconds of training: times a few steps first and trains min(--epochs, what fits) epochs "
