@@ -7,10 +7,11 @@
 Several training (or validation) recordings are concatenated in the order given.
 
 Devices: on the CPU (the default when no GPU is present) the batch defaults to 64 and the passes run in
-fp32, or with `--precision bf16` in bf16 autocast (1.4-1.7x the frames per second on a 2-core AMD EPYC with
-AVX512-BF16; CPUs without native bf16 emulate it, which was not measured). With `--device cuda` (or `auto` when a GPU is present) the frames,
-targets and augmentation live on the GPU, the passes run in bf16 autocast, and the batch defaults to
-256; the recipe (loss, augmentation, schedule, seeds) is the same, the random streams are the GPU's.
+fp32, or with `--precision bf16` in bf16 autocast (1.4-1.7x the frames per second on a 2-core AMD EPYC
+with AVX512-BF16; CPUs without native bf16 emulate it, which was not measured). With `--device cuda`
+(or `auto` when a GPU is present) the frames, targets and augmentation live on the GPU, the passes run
+in bf16 autocast, and the batch defaults to 256; the recipe (loss, augmentation, schedule, seeds) is
+the same, the random streams are the GPU's.
 
 After the last epoch the predicted uncertainties are calibrated on the validation frames (never the
 test sets): one scale for the position sigma and one for the heading's 1/sqrt(kappa), each the smallest
