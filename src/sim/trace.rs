@@ -1,6 +1,8 @@
 //! Casting one ray into the scene: intersections with the ground, goals, robots, ball and hall, and
 //! the shaded colour of what it hits.
 
+use std::cell::Cell;
+
 use nalgebra::{Point2, Point3, Vector3};
 
 use super::colour::{Linear, hsv_to_linear};
@@ -195,9 +197,26 @@ fn hall(scene: &Scene, ray: &Ray, seed: u64) -> (Linear, f64) {
     let row = (hit.z / PANEL_SIZE.1).floor() as i64;
     let wall_id = (axis as u64) * 2 + (side > 0.0) as u64;
     let hash = mix_bits(seed ^ mix_bits(wall_id ^ mix_bits(column as u64 ^ mix_bits(row as u64))));
-    let unit = |shift: u32| ((hash >> shift) & 0xffff) as f64 / 65535.0;
-    let albedo = hsv_to_linear(360.0 * unit(0), unit(16), 0.15 + 0.8 * unit(32));
-    (multiply(albedo, ambient), t_exit)
+    (multiply(panel_albedo(hash), ambient), t_exit)
+}
+
+/// The albedo of the wall panel with this hash. Neighbouring rays mostly meet the same panel, so each
+/// thread keeps the last one: the colour conversion takes three `pow`.
+fn panel_albedo(hash: u64) -> Linear {
+    thread_local! {
+        static LAST: Cell<Option<(u64, Linear)>> = const { Cell::new(None) };
+    }
+    LAST.with(|last| {
+        if let Some((key, albedo)) = last.get()
+            && key == hash
+        {
+            return albedo;
+        }
+        let unit = |shift: u32| ((hash >> shift) & 0xffff) as f64 / 65535.0;
+        let albedo = hsv_to_linear(360.0 * unit(0), unit(16), 0.15 + 0.8 * unit(32));
+        last.set(Some((hash, albedo)));
+        albedo
+    })
 }
 
 /// splitmix64's finaliser: a well-mixed 64-bit hash.
@@ -393,6 +412,19 @@ mod tests {
         scene.surroundings = Surroundings::Asymmetric { seed: 3 };
         let wall = trace(&scene, &ray((0.0, 0.0, 0.5), (1.0, 0.0, 0.1)));
         assert!(wall.iter().any(|channel| *channel > 0.0));
+    }
+
+    #[test]
+    fn a_panel_keeps_its_own_colour_whatever_panel_came_before() {
+        let colour = |hash: u64| {
+            let unit = |shift: u32| ((hash >> shift) & 0xffff) as f64 / 65535.0;
+            hsv_to_linear(360.0 * unit(0), unit(16), 0.15 + 0.8 * unit(32))
+        };
+        let hashes = [mix_bits(1), mix_bits(2), mix_bits(2), mix_bits(1), mix_bits(3)];
+        for hash in hashes {
+            assert_eq!(panel_albedo(hash), colour(hash));
+        }
+        assert_ne!(colour(hashes[0]), colour(hashes[1]));
     }
 
     #[test]
