@@ -200,8 +200,8 @@ fn hall(scene: &Scene, ray: &Ray, seed: u64) -> (Linear, f64) {
     (multiply(panel_albedo(hash), ambient), t_exit)
 }
 
-/// The albedo of the wall panel with this hash. Neighbouring rays mostly meet the same panel, so each
-/// thread keeps the last one: the colour conversion takes three `pow`.
+/// The albedo of the wall panel with this hash, `panel_colour` remembered: neighbouring rays mostly
+/// meet the same panel, so each thread keeps the last one (the conversion takes three `pow`).
 fn panel_albedo(hash: u64) -> Linear {
     thread_local! {
         static LAST: Cell<Option<(u64, Linear)>> = const { Cell::new(None) };
@@ -212,11 +212,16 @@ fn panel_albedo(hash: u64) -> Linear {
         {
             return albedo;
         }
-        let unit = |shift: u32| ((hash >> shift) & 0xffff) as f64 / 65535.0;
-        let albedo = hsv_to_linear(360.0 * unit(0), unit(16), 0.15 + 0.8 * unit(32));
+        let albedo = panel_colour(hash);
         last.set(Some((hash, albedo)));
         albedo
     })
+}
+
+/// A wall panel's colour from its hash: hue, saturation and value from three 16-bit fields.
+fn panel_colour(hash: u64) -> Linear {
+    let unit = |shift: u32| ((hash >> shift) & 0xffff) as f64 / 65535.0;
+    hsv_to_linear(360.0 * unit(0), unit(16), 0.15 + 0.8 * unit(32))
 }
 
 /// splitmix64's finaliser: a well-mixed 64-bit hash.
@@ -327,6 +332,11 @@ fn robot_hit(scene: &Scene, ray: &Ray, position: Point2<f64>, jersey: Linear) ->
     if passes_wide_of(ray, position) {
         return None;
     }
+    body_hit(scene, ray, position, jersey)
+}
+
+/// The nearest of a robot's legs, torso and head along the ray, without the cheap rejection.
+fn body_hit(scene: &Scene, ray: &Ray, position: Point2<f64>, jersey: Linear) -> Option<Hit> {
     let mut nearest = None;
     let legs = vertical_cylinder(ray, position, body::LEGS_RADIUS, 0.0, body::LEGS_TOP);
     Hit::keep_nearer(&mut nearest, legs.map(|(t, normal)| Hit { t, albedo: scene.white, normal }));
@@ -416,15 +426,11 @@ mod tests {
 
     #[test]
     fn a_panel_keeps_its_own_colour_whatever_panel_came_before() {
-        let colour = |hash: u64| {
-            let unit = |shift: u32| ((hash >> shift) & 0xffff) as f64 / 65535.0;
-            hsv_to_linear(360.0 * unit(0), unit(16), 0.15 + 0.8 * unit(32))
-        };
         let hashes = [mix_bits(1), mix_bits(2), mix_bits(2), mix_bits(1), mix_bits(3)];
         for hash in hashes {
-            assert_eq!(panel_albedo(hash), colour(hash));
+            assert_eq!(panel_albedo(hash), panel_colour(hash));
         }
-        assert_ne!(colour(hashes[0]), colour(hashes[1]));
+        assert_ne!(panel_colour(hashes[0]), panel_colour(hashes[1]));
     }
 
     #[test]
@@ -442,18 +448,8 @@ mod tests {
                     if passes_wide_of(&ray, robot) {
                         rejected += 1;
                         // Without the rejection, the body itself is missed too.
-                        let body = [
-                            vertical_cylinder(&ray, robot, body::LEGS_RADIUS, 0.0, body::LEGS_TOP),
-                            vertical_cylinder(
-                                &ray,
-                                robot,
-                                body::TORSO_RADIUS,
-                                body::LEGS_TOP,
-                                body::TORSO_TOP,
-                            ),
-                            sphere(&ray, Point3::new(robot.x, robot.y, body::HEAD_CENTRE), body::HEAD_RADIUS),
-                        ];
-                        assert!(body.iter().all(Option::is_none), "{origin:?} {azimuth} {elevation}");
+                        let body = body_hit(&scene, &ray, robot, [0.5; 3]);
+                        assert!(body.is_none(), "{origin:?} {azimuth} {elevation}");
                     }
                     hits += usize::from(hit);
                 }
