@@ -10,9 +10,11 @@ use anyhow::{Context, bail};
 use clap::{Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use tracing::info;
+use tracing_subscriber::layer::SubscriberExt;
+use tracing_subscriber::util::SubscriberInitExt;
 
 use relocd::bench::Stage;
-use relocd::daemon::config::{Config, Listen, SensorInput, SourceSpec};
+use relocd::daemon::config::{Config, Listen, SensorInput, SourceSpec, log_filter};
 use relocd::daemon::record::RecordOptions;
 use relocd::frame::{Frame, YuyvImage};
 use relocd::geometry::{CameraIntrinsics, CameraPose, FieldDimensions, FieldModel, Representation};
@@ -29,8 +31,8 @@ use relocd::sim::{DatasetSpec, Randomisation, render_dataset};
 #[derive(Debug, Parser)]
 #[command(name = "relocd", version, about, long_about = None)]
 struct Cli {
-    /// Log level or filter for messages on stderr (error, warn, info, debug, trace) [default: info,
-    /// or the config's `log_level` for `run`].
+    /// Log level for messages on stderr (error, warn, info, debug, trace), or targets and levels such
+    /// as warn,relocd=debug [default: info, or the config's `log_level` for `run`].
     #[arg(long, global = true, env = "RELOCD_LOG")]
     log_level: Option<String>,
 
@@ -460,13 +462,13 @@ fn main() -> ExitCode {
 }
 
 fn init_logging(filter: &str) -> anyhow::Result<()> {
-    let filter = tracing_subscriber::EnvFilter::try_new(filter)
-        .with_context(|| format!("bad --log-level {filter:?}: expected e.g. info, debug or relocd=trace"))?;
-    tracing_subscriber::fmt()
-        .with_env_filter(filter)
+    let filter = log_filter(filter).map_err(|error| {
+        anyhow::anyhow!("bad --log-level {filter:?}: {error}; expected e.g. info, debug or warn,relocd=trace")
+    })?;
+    let output = tracing_subscriber::fmt::layer()
         .with_writer(std::io::stderr)
-        .with_ansi(std::io::stderr().is_terminal())
-        .init();
+        .with_ansi(std::io::stderr().is_terminal());
+    tracing_subscriber::registry().with(output).with(filter).init();
     Ok(())
 }
 

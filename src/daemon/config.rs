@@ -8,6 +8,7 @@ use std::str::FromStr;
 
 use serde::Deserialize;
 use thiserror::Error;
+use tracing_subscriber::filter::{ParseError, Targets};
 
 use crate::geometry::{CameraIntrinsics, CameraMounting, CameraPose, PoseError, Representation};
 use crate::pipeline::GlobalSearch;
@@ -48,7 +49,7 @@ pub enum ConfigError {
 #[derive(Clone, Debug, PartialEq, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct Config {
-    /// Log level or filter (error, warn, info, debug, trace).
+    /// Log level (error, warn, info, debug, trace), or targets and levels (see [`log_filter`]).
     pub log_level: String,
     /// Where frames come from.
     pub source: SourceSpec,
@@ -253,11 +254,21 @@ impl Config {
         if !(0.0..=60.0).contains(&self.gamecontroller.min_penalty_s) {
             return invalid("gamecontroller.min_penalty_s", "must lie in [0, 60] seconds");
         }
-        if tracing_subscriber::EnvFilter::try_new(&self.log_level).is_err() {
-            return invalid("log_level", "expected error, warn, info, debug, trace or a tracing filter");
+        if log_filter(&self.log_level).is_err() {
+            return invalid(
+                "log_level",
+                "expected error, warn, info, debug, trace or targets such as warn,relocd=debug",
+            );
         }
         Ok(())
     }
+}
+
+/// The log filter `spec` names: a level (`error`, `warn`, `info`, `debug`, `trace`, `off`), or
+/// comma-separated `target=level` directives with an optional bare default level, as in
+/// `warn,relocd=debug`.
+pub fn log_filter(spec: &str) -> Result<Targets, ParseError> {
+    spec.parse()
 }
 
 /// GameController input.
@@ -722,6 +733,21 @@ mod tests {
         assert_eq!(intrinsics.vertical_fov, CameraIntrinsics::nao_top().vertical_fov);
         assert_eq!(Config::default().camera.intrinsics(CameraIntrinsics::nao_top()), Ok(None));
         assert!(message("control = \"unix:/tmp/x\"\nsensors = \"unix:/tmp/x\"").contains("different"));
+    }
+
+    #[test]
+    fn log_levels_and_targets_parse_and_a_bad_one_names_the_key() {
+        for spec in ["info", "DEBUG", "off", "relocd=trace", "warn,relocd=debug,tract_core=error"] {
+            assert!(log_filter(spec).is_ok(), "{spec}");
+        }
+        let filter = log_filter("warn,relocd=debug").unwrap();
+        assert!(filter.would_enable("relocd::daemon", &tracing::Level::DEBUG));
+        assert!(!filter.would_enable("tract_core::model", &tracing::Level::INFO));
+        for spec in ["relocd=loud", "loud=[", "a=b=c"] {
+            assert!(log_filter(spec).is_err(), "{spec}");
+            let message = parse(&format!("log_level = {spec:?}")).unwrap_err().to_string();
+            assert!(message.contains("log_level"), "{message}");
+        }
     }
 
     #[test]
