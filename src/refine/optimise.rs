@@ -19,12 +19,13 @@ use crate::geometry::angle::normalize_angle;
 /// Scale of the Cauchy loss, in standard deviations of a point.
 const CAUCHY_SCALE: f64 = 2.0;
 /// Scale of the Cauchy loss on the pose's distance from the prior, in the prior's standard
-/// deviations: a guess a σ or more off (a network is lost now and then) pulls the fit much less than a
-/// Gaussian would, so what little the lines say along a line decides there; near the guess the loss is
-/// the Gaussian's, and where the lines say nothing at all the fit stays at the guess. (On tuning seeds
-/// 2 σ and a Gaussian found fewer poses, 0.5 σ more but fewer bursts' camera measurements agreed;
-/// BENCHMARKS.md, "A prior that yields".)
-const PRIOR_SCALE: f64 = 1.0;
+/// deviations: a guess half a σ or more off (a network is lost now and then) pulls the fit much less
+/// than a Gaussian would, so what little the lines say along a line decides there; near the guess the
+/// loss is the Gaussian's, and where the lines say nothing at all the fit stays at the guess. (On six
+/// tuning sets 2 σ, 1 σ and a Gaussian found fewer poses; a quarter σ found a few more, but let one
+/// stray goal-post bearing drag a fit metres along its line; BENCHMARKS.md, "A prior that yields" and
+/// "A prior that yields sooner".)
+const PRIOR_SCALE: f64 = 0.5;
 /// Coarse search: offsets per axis, in steps, each side of the start.
 const SEARCH_STEPS: i32 = 2;
 /// Coarse search: step as a share of the prior's standard deviation.
@@ -637,11 +638,12 @@ mod tests {
         assert!(fit.covariance[(0, 0)].sqrt() < 0.1, "{}", fit.covariance[(0, 0)].sqrt());
         // The post sharpens the pose, but it is not the lines' evidence.
         assert!(fit.line_information[(0, 0)] < 1e-6 * fit.line_information[(1, 1)]);
-        // A bearing far from every post's is one loose observation, not a pull.
+        // A bearing far from every post's is one loose observation: it may tug the fit along the line
+        // (less than a third of the prior's 0.3 m), never drag it to a place where it would fit.
         let astray = [PostBearing { bearing: 1.2, calibration_rates: Vector2::zeros() }];
         let astray = PostBearings { field: &field_posts, seen: &astray };
         let fit = super::fit(&map, &observations, &astray, &prior, true);
-        assert_abs_diff_eq!(fit.pose.x(), 1.4, epsilon = 0.05);
+        assert_abs_diff_eq!(fit.pose.x(), 1.4, epsilon = 0.1);
     }
 
     #[test]
