@@ -14,7 +14,7 @@ use tracing_subscriber::layer::SubscriberExt;
 use tracing_subscriber::util::SubscriberInitExt;
 
 use relocd::bench::Stage;
-use relocd::daemon::config::{Config, Listen, SensorInput, SourceSpec, log_filter};
+use relocd::daemon::config::{Config, Listen, NO_MODEL, SensorInput, SourceSpec, log_filter};
 use relocd::daemon::record::RecordOptions;
 use relocd::frame::{Frame, YuyvImage};
 use relocd::geometry::{CameraIntrinsics, CameraPose, FieldDimensions, FieldModel, Representation};
@@ -68,7 +68,7 @@ enum Command {
 #[derive(Debug, clap::Args)]
 struct ModelArgs {
     /// ONNX model file [default: the built-in SqueezeNet half-point model for the engine]; `replay`
-    /// also takes `none`: no network, the field lines alone.
+    /// and `run` also take `none`: no network, the field lines alone.
     #[arg(long)]
     model: Option<PathBuf>,
     /// Inference engine: tract (built in) or onnxruntime (needs the onnxruntime feature and
@@ -80,7 +80,7 @@ struct ModelArgs {
 impl ModelArgs {
     /// Whether `--model none` asks for no network at all.
     fn is_none(&self) -> bool {
-        self.model.as_deref() == Some(Path::new("none"))
+        self.model.as_deref() == Some(Path::new(NO_MODEL))
     }
 
     /// Loads the model; returns it with the name to report.

@@ -45,6 +45,9 @@ pub enum ConfigError {
     },
 }
 
+/// The `model` (and `--model`) that asks for no network at all: the field lines alone.
+pub const NO_MODEL: &str = "none";
+
 /// Everything `relocd run` needs.
 #[derive(Clone, Debug, PartialEq, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -53,7 +56,8 @@ pub struct Config {
     pub log_level: String,
     /// Where frames come from.
     pub source: SourceSpec,
-    /// ONNX model file; absent: the model built into the binary for `backend`.
+    /// ONNX model file; absent: the model built into the binary for `backend`; [`NO_MODEL`]: no
+    /// network, the field lines alone (needs `refine`).
     pub model: Option<PathBuf>,
     /// Field description file (TOML or JSON, see `relocd field`) whose lines the frames are checked
     /// against, e.g. a lab's smaller field; absent: the model contract's field.
@@ -143,6 +147,12 @@ impl Config {
         Self::parse(&text, path)
     }
 
+    /// Whether `model` asks for no network: the field lines alone, searched all over the field after
+    /// every burst (before a network exists for the hall or the field).
+    pub fn lines_only(&self) -> bool {
+        self.model.as_deref() == Some(Path::new(NO_MODEL))
+    }
+
     /// How to load the model: the configured engine and representation.
     pub fn load_options(&self) -> LoadOptions {
         LoadOptions { backend: self.backend, representation: self.representation }
@@ -162,6 +172,9 @@ impl Config {
         }
         if self.team.is_some() != self.player.is_some() {
             return invalid("team", "give both `team` and `player` for the penalty trigger, or neither");
+        }
+        if self.lines_only() && !self.refine {
+            return invalid("model", "\"none\" (no network: the field lines alone) needs refine = true");
         }
         if !(1..=30).contains(&self.burst.frames) {
             return invalid("burst.frames", "a burst has 1 to 30 frames");
@@ -733,6 +746,15 @@ mod tests {
         assert_eq!(intrinsics.vertical_fov, CameraIntrinsics::nao_top().vertical_fov);
         assert_eq!(Config::default().camera.intrinsics(CameraIntrinsics::nao_top()), Ok(None));
         assert!(message("control = \"unix:/tmp/x\"\nsensors = \"unix:/tmp/x\"").contains("different"));
+    }
+
+    #[test]
+    fn model_none_runs_the_lines_alone_and_needs_refinement() {
+        assert!(parse("model = \"none\"").unwrap().lines_only());
+        assert!(!parse("model = \"lab.onnx\"").unwrap().lines_only());
+        assert!(!Config::default().lines_only(), "the built-in model by default");
+        let message = parse("model = \"none\"\nrefine = false").unwrap_err().to_string();
+        assert!(message.contains("`model`") && message.contains("refine"), "{message}");
     }
 
     #[test]

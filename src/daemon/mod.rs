@@ -21,7 +21,7 @@ use anyhow::{Context, bail};
 use tokio::signal::unix::{SignalKind, signal};
 use tracing::{info, warn};
 
-use self::config::{Config, Listen, SensorInput, SourceSpec};
+use self::config::{Config, Listen, NO_MODEL, SensorInput, SourceSpec};
 use self::publish::Publisher;
 use self::queue::TriggerQueue;
 use self::sockets::Datagram;
@@ -30,7 +30,7 @@ use self::source::{FrameSource, SourceSettings};
 use self::status::Status;
 use self::triggers::{Sensed, Triggers};
 use self::worker::{ModelSlot, Worker};
-use crate::geometry::{FieldDimensions, FieldModel};
+use crate::geometry::{CameraIntrinsics, FieldDimensions, FieldModel};
 use crate::pipeline::Pipeline;
 use crate::posture::{PostureConfig, PostureDetector};
 use crate::protocol::address::Address;
@@ -45,29 +45,25 @@ const TRIGGER_QUEUE: usize = 64;
 pub fn run(config: Config) -> anyhow::Result<()> {
     config.validate()?;
     apply_process_settings(&config)?;
-    let (model, _) = relocaliser::load_model(config.model.as_deref(), config.load_options())?;
-    let contract = model.contract();
-    match config.backend {
-        Backend::Tract => info!(
-            "model {} ({}), tract kernels for {}",
-            contract.model_id,
-            contract.representation,
-            relocaliser::kernel_isa()
-        ),
-        Backend::Onnxruntime => {
-            info!("model {} ({}), ONNX Runtime", contract.model_id, contract.representation)
-        }
-    }
+    let model = if config.lines_only() {
+        info!("no network (model = \"{NO_MODEL}\"): the field lines alone, searched all over the field");
+        None
+    } else {
+        Some(load_model(&config)?)
+    };
+    let contract = model.as_ref().map(Model::contract);
     let field = match &config.field {
         Some(path) => {
             let dimensions = FieldDimensions::load(path).context("the config's `field`")?;
             info!("field lines from {}", path.display());
             FieldModel::new(dimensions)
         }
-        None => FieldModel::new(contract.field.clone()),
+        None => contract.map_or_else(FieldModel::default, |contract| FieldModel::new(contract.field.clone())),
     };
-    let intrinsics = config.camera.intrinsics(contract.camera).expect("validated with the config");
-    let status = Arc::new(Status::new(config.source.to_string(), contract.model_id.clone()));
+    let camera = contract.map_or_else(CameraIntrinsics::nao_top, |contract| contract.camera);
+    let intrinsics = config.camera.intrinsics(camera).expect("validated with the config");
+    let model_id = contract.map_or_else(|| NO_MODEL.to_string(), |contract| contract.model_id.clone());
+    let status = Arc::new(Status::new(config.source.to_string(), model_id));
     let publisher = Publisher::new(config.publish.targets.clone(), config.publish.encoding)
         .context("cannot create the publishing sockets")?;
 
@@ -84,25 +80,31 @@ pub fn run(config: Config) -> anyhow::Result<()> {
         let terminate = signal(SignalKind::terminate())?;
         let interrupt = signal(SignalKind::interrupt())?;
         let hangup = signal(SignalKind::hangup())?;
-        let source = open_source(&config, &model, &status)?;
+        let source = open_source(&config, &field, &status)?;
         start_inputs(&config, &triggers, &sensed, &status)?;
         anyhow::Ok((source, terminate, interrupt, hangup))
     })?;
     drop(triggers);
     let replacement = Arc::new(ModelSlot::default());
 
-    let pipeline = Pipeline::new(model);
-    let pipeline = match intrinsics {
-        Some(intrinsics) => pipeline.with_intrinsics(intrinsics),
-        None => pipeline,
-    };
-    let pipeline = if config.refine {
-        pipeline
-            .with_lines(&field)
-            .with_camera_correction(config.camera_correction)
-            .with_global_search(config.global_search)
-    } else {
-        pipeline
+    let pipeline = match model {
+        Some(model) => {
+            let pipeline = Pipeline::new(model);
+            let pipeline = match intrinsics {
+                Some(intrinsics) => pipeline.with_intrinsics(intrinsics),
+                None => pipeline,
+            };
+            if config.refine {
+                pipeline
+                    .with_lines(&field)
+                    .with_camera_correction(config.camera_correction)
+                    .with_global_search(config.global_search)
+            } else {
+                pipeline
+            }
+        }
+        None => Pipeline::lines_only(&field, intrinsics.unwrap_or(camera))
+            .with_camera_correction(config.camera_correction),
     };
     let worker = Worker {
         pipeline,
@@ -155,7 +157,29 @@ pub fn run(config: Config) -> anyhow::Result<()> {
 /// SIGHUP: loads the configured model file again and offers it to the relocalisation thread. A file
 /// that cannot be used leaves the running model in place, and the log and `status` say why. Inputs
 /// wait while the file loads (their datagrams queue in the kernel).
+/// Loads the configured model and logs which it is and what runs it.
+fn load_model(config: &Config) -> anyhow::Result<Model> {
+    let (model, _) = relocaliser::load_model(config.model.as_deref(), config.load_options())?;
+    let contract = model.contract();
+    match config.backend {
+        Backend::Tract => info!(
+            "model {} ({}), tract kernels for {}",
+            contract.model_id,
+            contract.representation,
+            relocaliser::kernel_isa()
+        ),
+        Backend::Onnxruntime => {
+            info!("model {} ({}), ONNX Runtime", contract.model_id, contract.representation)
+        }
+    }
+    Ok(model)
+}
+
 fn reload_model(config: &Config, replacement: &ModelSlot, status: &Status) {
+    if config.lines_only() {
+        warn!("SIGHUP: no model to reload (model = \"{NO_MODEL}\": the field lines alone)");
+        return;
+    }
     let Some(path) = &config.model else {
         warn!("SIGHUP: no model file to reload (the built-in model is in use)");
         return;
@@ -203,7 +227,11 @@ fn apply_process_settings(config: &Config) -> anyhow::Result<()> {
 }
 
 /// The configured frame source; a forwarded-frame listener is started for `frames:`.
-fn open_source(config: &Config, model: &Model, status: &Arc<Status>) -> anyhow::Result<Box<dyn FrameSource>> {
+fn open_source(
+    config: &Config,
+    field: &FieldModel,
+    status: &Arc<Status>,
+) -> anyhow::Result<Box<dyn FrameSource>> {
     let frames = match &config.source {
         SourceSpec::Frames(path) => {
             let listener = sockets::bind_stream(path)
@@ -218,7 +246,7 @@ fn open_source(config: &Config, model: &Model, status: &Arc<Status>) -> anyhow::
     let settings = SourceSettings {
         camera: config.camera.clone(),
         sim: config.sim.clone(),
-        field: FieldModel::new(model.contract().field.clone()),
+        field: field.clone(),
         looping: config.replay.looping,
     };
     source::open(&config.source, &settings, frames)

@@ -235,6 +235,39 @@ fn forwarded_frames_are_used_and_a_lying_header_is_dropped() {
     daemon.stop();
 }
 
+/// `--model none`: no network, the lines alone place the robot (and its point twin); the message and
+/// `status` name no model, and SIGHUP has none to reload.
+#[test]
+fn with_no_network_the_lines_alone_place_the_robot() {
+    let daemon = Daemon::start("frames:unix:{dir}/frames", &["--burst", "1", "--model", "none"]);
+    assert_eq!(daemon.status()["model"], "none");
+    let recording = Recording::open(&sample()).unwrap();
+    let record = &recording.records()[0];
+    let image = sample_yuyv();
+    let camera = record.camera.unwrap_or(CameraPose::STANDING);
+    let header =
+        FrameHeader { width: image.width(), height: image.height(), timestamp: 1.0, camera: Some(camera) };
+    let frame = [&header.to_bytes()[..], image.as_bytes()].concat();
+    let stream = UnixStream::connect(daemon.socket("frames")).unwrap();
+    let sender = stream_frames(stream, frame, 40, Duration::from_millis(50));
+    std::thread::sleep(Duration::from_millis(200));
+    daemon.hang_up();
+    daemon.control(br#"{"relocalise": {"reason": "no network for this hall yet"}}"#);
+    let message = daemon.message();
+    assert!(message.failure.is_none(), "{:?}", message.failure);
+    assert_eq!(message.model.id, "none");
+    let count = message.hypotheses.len();
+    assert!(count >= 2 && count % 2 == 0, "every place and its twin: {count} hypotheses");
+    assert!(message.hypotheses.iter().all(|hypothesis| hypothesis.lines.is_some()));
+    // The sample's first frame shows lines that fix the pose but for the point symmetry.
+    let truth = record.pose.unwrap();
+    let off = |x: f64, y: f64| (x - truth.x()).hypot(y - truth.y()).min((x + truth.x()).hypot(y + truth.y()));
+    assert!(message.hypotheses.iter().any(|h| off(h.x, h.y) < 0.1), "{:?}", message.hypotheses);
+    assert_eq!(daemon.status()["model"], "none", "SIGHUP loaded nothing");
+    sender.join().unwrap();
+    daemon.stop();
+}
+
 #[test]
 fn the_head_yaw_the_sensors_report_turns_the_published_heading() {
     let daemon = Daemon::start("frames:unix:{dir}/frames", &["--burst", "1", "--no-refine"]);
