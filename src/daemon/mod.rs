@@ -154,9 +154,6 @@ pub fn run(config: Config) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// SIGHUP: loads the configured model file again and offers it to the relocalisation thread. A file
-/// that cannot be used leaves the running model in place, and the log and `status` say why. Inputs
-/// wait while the file loads (their datagrams queue in the kernel).
 /// Loads the configured model and logs which it is and what runs it.
 fn load_model(config: &Config) -> anyhow::Result<Model> {
     let (model, _) = relocaliser::load_model(config.model.as_deref(), config.load_options())?;
@@ -175,6 +172,9 @@ fn load_model(config: &Config) -> anyhow::Result<Model> {
     Ok(model)
 }
 
+/// SIGHUP: loads the configured model file again and offers it to the relocalisation thread. A file
+/// that cannot be used leaves the running model in place, and the log and `status` say why. Inputs
+/// wait while the file loads (their datagrams queue in the kernel).
 fn reload_model(config: &Config, replacement: &ModelSlot, status: &Status) {
     if config.lines_only() {
         warn!("SIGHUP: no model to reload (model = \"{NO_MODEL}\": the field lines alone)");
