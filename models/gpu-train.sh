@@ -20,6 +20,9 @@
 #   VERSION=3                       the model version in the model ids
 #   DEVICE=cuda                     train.py --device (cpu runs the same recipe on the CPU, slowly)
 #   PRECISION=auto                  train.py --precision (auto: bf16 on a GPU, fp32 on the CPU)
+#   INIT_ONNX=                      an fp32 ONNX file (path from models/) to continue instead of starting
+#                                   from scratch (train.py --init-onnx), e.g. squeezenet-half-point.fp32.onnx
+#   LR=3e-3 SEED=1                  train.py --lr and --seed (a continuation: a third of the rate, a new seed)
 #   PYTHON=python3
 #
 # Seeds (models/README.md, "Recipe"): training 1010 (plain) and 1011 (hall realism), validation 2010
@@ -31,6 +34,12 @@ relocd=$(realpath "$1") work=$2 results=$3
 FRAMES=${FRAMES:-40000} VAL_FRAMES=${VAL_FRAMES:-1500}
 WIDTHS=${WIDTHS:-"0.5 0.75 1.0"} EPOCHS=${EPOCHS:-"30 24 20"}
 DEFAULT_WIDTH=${DEFAULT_WIDTH:-0.5} VERSION=${VERSION:-3} DEVICE=${DEVICE:-cuda} PRECISION=${PRECISION:-auto}
+LR=${LR:-3e-3} SEED=${SEED:-1}
+init=()
+if [ -n "${INIT_ONNX:-}" ]; then
+    init=(--init-onnx "$(realpath "$INIT_ONNX")")
+    [ "$(wc -w <<< "$WIDTHS")" = 1 ] || { echo "INIT_ONNX continues one network: set WIDTHS to its width" >&2; exit 2; }
+fi
 PYTHON=${PYTHON:-python3}
 # The real Nao's top camera (issue 18): crouched walk to standing, 10° up to 25° down, rolled ±5°.
 CAMERA=(--camera-height 0.38,0.55 --camera-pitch=-10,25 --max-camera-roll 5)
@@ -65,8 +74,9 @@ for width in $WIDTHS; do
     name=$(name_of "$width")
     stamp "train $name: width $width, at most ${epochs[$index]} epochs on $DEVICE, budget $budget s"
     PYTHONUNBUFFERED=1 "$PYTHON" train.py --train "$work/train" "$work/train-realism" --val "$work/val" "$work/val-realism" \
-        --arch squeezenet --width "$width" --representation half-point --epochs "${epochs[$index]}" --seed 1 \
-        --device "$DEVICE" --precision "$PRECISION" --threads 2 --time-budget "$budget" --out "$work/runs/$name" > "$work/$name.log" 2>&1 &
+        --arch squeezenet --width "$width" --representation half-point --epochs "${epochs[$index]}" --seed "$SEED" \
+        --lr "$LR" "${init[@]}" --device "$DEVICE" --precision "$PRECISION" --threads 2 --time-budget "$budget" \
+        --out "$work/runs/$name" > "$work/$name.log" 2>&1 &
     pids+=($!)
     index=$((index + 1))
 done

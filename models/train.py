@@ -4,7 +4,9 @@
         --arch squeezenet --width 0.5 --representation half-point --epochs 20 --seed 1 \
         --out models/build/squeezenet-half-point [--device auto|cuda|cpu]
 
-Several training (or validation) recordings are concatenated in the order given.
+Several training (or validation) recordings are concatenated in the order given. `--init RUN` continues
+a run from its weights.pt, `--init-onnx FILE` an exported fp32 file (the committed default, say: its
+batch norms are re-derived by relocnet/unfold.py), each with a new schedule.
 
 Devices: on the CPU (the default when no GPU is present) the batch defaults to 64 and the passes run in
 fp32, or with `--precision bf16` in bf16 autocast (1.4-1.7x the frames per second on a 2-core AMD EPYC
@@ -40,10 +42,13 @@ import torch.nn.functional as F
 from relocnet.data import load_recordings
 from relocnet.fold import fold, mirror_long_axis
 from relocnet.nets import RelocNet, count_macs, count_parameters
+from relocnet.unfold import unfold
 
 BETA = 0.5
 # Share of validation frames allowed beyond 3 sigma after calibration (the target on test is <= 5%).
 CALIBRATION_SHARE = 0.02
+# Training frames whose statistics re-derive the batch norms of an exported file (--init-onnx).
+ONNX_STATISTICS_FRAMES = 512
 
 
 def folded_targets(poses, representation, flipped):
@@ -219,8 +224,13 @@ def main():
                         help="seconds of training: times a few steps first and trains min(--epochs, what fits) epochs "
                              "(the number is logged; pass it as --epochs to repeat the run)")
     parser.add_argument("--init", type=Path, help="continue from this run directory's weights.pt (a new schedule)")
+    parser.add_argument("--init-onnx", type=Path,
+                        help="continue from an exported fp32 ONNX file (its batch norms re-derived on 512 of the "
+                             "training frames; a new schedule), e.g. the committed default")
     parser.add_argument("--out", required=True, type=Path)
     args = parser.parse_args()
+    if args.init and args.init_onnx:
+        parser.error("--init and --init-onnx: one or the other")
 
     if args.device == "auto":
         args.device = "cuda" if torch.cuda.is_available() else "cpu"
@@ -247,10 +257,21 @@ def main():
     val_targets, val_bits = (t.to(device) for t in folded_targets(val_poses, args.representation, False))
     val_images = torch.from_numpy(val_images).to(device)
 
-    net = RelocNet(args.arch, args.width, args.representation).to(memory_format=torch.channels_last)
+    net = RelocNet(args.arch, args.width, args.representation)
     if args.init:
         net.load_state_dict(torch.load(args.init / "weights.pt", map_location="cpu"))
         print(f"continuing from {args.init}")
+    if args.init_onnx:
+        frames = train_images[:: max(1, len(train_images) // ONNX_STATISTICS_FRAMES)][:ONNX_STATISTICS_FRAMES]
+        net, exported = unfold(args.init_onnx, frames.cpu().numpy())
+        training = exported["training"]
+        if (training["architecture"], float(training["width"]), exported["representation"]) != \
+                (args.arch, args.width, args.representation):
+            parser.error(f"{args.init_onnx} is {training['architecture']} width {training['width']} "
+                         f"{exported['representation']}, not what --arch, --width and --representation ask")
+        net.train()
+        print(f"continuing from {args.init_onnx} ({exported['model_id']})")
+    net = net.to(memory_format=torch.channels_last)
     macs, parameters = count_macs(net), count_parameters(net)
     net.to(device)
     print(f"{args.arch} width {args.width} {args.representation}: {macs / 1e6:.1f} M MACs, {parameters / 1e6:.2f} M parameters;"
@@ -278,6 +299,13 @@ def main():
         earlier = json.loads((args.init / "training.json").read_text())
         log["continued_from"] = {"run": args.init.name, "epochs": len(earlier["epochs"]),
                                  "train_seconds": earlier["train_seconds"], "lr": earlier["args"]["lr"]}
+    if args.init_onnx:
+        log["continued_from"] = {"model": exported["model_id"], "epochs": training["epochs"],
+                                 "train_seconds": training["train_seconds"],
+                                 "continued_from": training.get("continued_from")}
+    if args.init or args.init_onnx:
+        log["start_val"] = evaluate(net, val_images, val_targets, val_bits)
+        print(json.dumps({"start_val": log["start_val"]}), flush=True)
     started = time.time()
     for epoch in range(args.epochs):
         order = torch.randperm(len(train_images), generator=generator, device=device)
