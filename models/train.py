@@ -263,7 +263,10 @@ def main():
         print(f"continuing from {args.init}")
     if args.init_onnx:
         frames = train_images[:: max(1, len(train_images) // ONNX_STATISTICS_FRAMES)][:ONNX_STATISTICS_FRAMES]
-        net, exported = unfold(args.init_onnx, frames.cpu().numpy())
+        try:
+            net, exported = unfold(args.init_onnx, frames.cpu().numpy())
+        except ValueError as error:
+            parser.error(str(error))
         training = exported["training"]
         if (training["architecture"], float(training["width"]), exported["representation"]) != \
                 (args.arch, args.width, args.representation):

@@ -21,7 +21,8 @@ import torch
 from onnx import numpy_helper
 from torch import nn
 
-from .nets import RelocNet, output_names
+from .fold import FOLD_BITS
+from .nets import ARCHITECTURES, RelocNet, output_names
 from .onnxfile import CONTRACT_KEY, normalise
 
 # Frames on which the unfolded network is checked against the file (onnxruntime), and the largest
@@ -30,8 +31,11 @@ CHECK_FRAMES = 8
 CHECK_TOLERANCE = 1e-4
 
 
-def _contract(model):
-    return json.loads(next(entry.value for entry in model.metadata_props if entry.key == CONTRACT_KEY))
+def _contract(model, path):
+    document = next((entry.value for entry in model.metadata_props if entry.key == CONTRACT_KEY), None)
+    if document is None:
+        raise ValueError(f"{path}: no {CONTRACT_KEY} metadata (not a relocd model?)")
+    return json.loads(document)
 
 
 def _conv_bn_pairs(net):
@@ -44,7 +48,7 @@ def _conv_bn_pairs(net):
     return pairs
 
 
-def _node_weights(model, op_type):
+def _node_weights(model, op_type, path):
     """The (weight, bias) initialisers of each `op_type` node, in graph order."""
     initialisers = {tensor.name: numpy_helper.to_array(tensor) for tensor in model.graph.initializer}
     weights = []
@@ -52,7 +56,8 @@ def _node_weights(model, op_type):
         if node.op_type == op_type:
             arrays = [initialisers.get(name) for name in node.input[1:3]]
             if any(array is None for array in arrays):
-                raise ValueError(f"{op_type} node {node.name} has no constant weight and bias (not an fp32 export?)")
+                raise ValueError(f"{path}: {op_type} node {node.name} has no constant weight and bias "
+                                 "(not an fp32 export?)")
             weights.append(arrays)
     return weights
 
@@ -60,15 +65,23 @@ def _node_weights(model, op_type):
 def unfold(path, images, batch=256):
     """Returns (RelocNet in eval mode, the file's contract) for the fp32 ONNX file at `path`, its batch
     norms re-derived on `images` (uint8 NHWC frames of the network's input size, a few hundred do)."""
-    model = onnx.load(str(path))
-    contract = _contract(model)
-    training = contract["training"]
+    try:
+        model = onnx.load(str(path))
+    except Exception as error:  # protobuf's DecodeError, an OSError, ...
+        raise ValueError(f"{path}: not a readable ONNX file ({error})") from error
+    contract = _contract(model, path)
+    training = contract.get("training", {})
+    if training.get("architecture") not in ARCHITECTURES or "width" not in training:
+        raise ValueError(f"{path}: the contract names no known architecture and width "
+                         f"({training.get('architecture')!r}; known: {', '.join(ARCHITECTURES)})")
+    if contract.get("representation") not in FOLD_BITS:
+        raise ValueError(f"{path}: unknown representation {contract.get('representation')!r}")
     net = RelocNet(training["architecture"], float(training["width"]), contract["representation"])
     pairs = _conv_bn_pairs(net)
-    convs = _node_weights(model, "Conv")
+    convs = _node_weights(model, "Conv", path)
     if len(convs) != len(pairs):
         raise ValueError(f"{path}: {len(convs)} convolutions, the network has {len(pairs)} (not an fp32 export?)")
-    gemms = _node_weights(model, "Gemm")
+    gemms = _node_weights(model, "Gemm", path)
     linears = [net.fc[1], net.out]
     if len(gemms) != len(linears):
         raise ValueError(f"{path}: {len(gemms)} fully connected layers, the network has {len(linears)}")
