@@ -5,8 +5,12 @@ heading error exceeds 3 / sqrt(heading_kappa).
 
     python models/evaluate.py --model models/squeezenet-half-point.w8.onnx [--model ...] \
         --data DATA/test DATA/test-realism [--json FILE]
+    python models/evaluate.py --model models/squeezenet-half-point.w8.onnx --images IMAGE...
 
 Prints one JSON line per (model, recording). Frames must be at the model's input size (160x120).
+`--images` takes image files without poses (real camera images, say), reduces each to the input size
+by whole-block means as relocd's preprocessing does (640x480 -> 4x4 blocks; rounded to 8 bits here)
+and prints the predicted uncertainty of each, then its medians: there is no error to compare it with.
 `relocd replay --metrics-json` stays the reference for the accuracy figures; this adds the 3-sigma
 shares, which replay does not report.
 """
@@ -17,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 import onnxruntime
+from PIL import Image
 
 from relocnet.data import load_recording
 from relocnet.fold import fold
@@ -43,18 +48,44 @@ def evaluate(session, names, representation, images, poses):
         "position_beyond_3_sigma": round(float(np.mean(location > 3 * sigma)), 4),
         "heading_beyond_3_sigma": round(float(np.mean(heading > 3 / np.sqrt(kappa))), 4),
         "position_sigma_median_cm": round(float(np.median(sigma)) * 100, 1),
+        "heading_spread_median_deg": round(float(np.degrees(np.median(1 / np.sqrt(kappa)))), 2),
     }
+
+
+def reduce_to_input(path, width=160, height=120):
+    """An image file as the network's uint8 input: means of whole blocks (rounded to 8 bits)."""
+    image = np.asarray(Image.open(path).convert("RGB"), np.float32)
+    rows, columns = image.shape[:2]
+    block = rows // height
+    if block < 1 or rows != block * height or columns != block * width:
+        raise SystemExit(f"{path}: {columns}x{rows} is not a whole multiple of {width}x{height}")
+    return np.round(image.reshape(height, block, width, block, 3).mean(axis=(1, 3))).astype(np.uint8)
+
+
+def uncertainties(session, names, images):
+    """Per image: the predicted position sigma (cm) and the heading's spread 1/sqrt(kappa) (degrees)."""
+    rows = []
+    for image in images:
+        outputs = dict(zip(names, session.run(names, {"image": normalise(image[None])})))
+        kappa = float(outputs["heading_kappa"].reshape(-1)[0])
+        rows.append((round(float(outputs["position_sigma"].reshape(-1)[0]) * 100, 1),
+                     round(float(np.degrees(1 / np.sqrt(kappa))), 2)))
+    return rows
 
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--model", required=True, type=Path, action="append")
-    parser.add_argument("--data", required=True, type=Path, nargs="+")
+    parser.add_argument("--data", type=Path, nargs="+", default=[], help="rendered recordings (with true poses)")
+    parser.add_argument("--images", type=Path, nargs="+", default=[], help="image files without poses")
     parser.add_argument("--limit", type=int, default=0, help="only the first N frames of each recording")
     parser.add_argument("--json", type=Path, help="also write all results to this file")
     args = parser.parse_args()
+    if not args.data and not args.images:
+        parser.error("nothing to evaluate: give --data or --images")
     results = []
     recordings = [(path, *load_recording(path)) for path in args.data]
+    images = [reduce_to_input(path) for path in args.images]
     for model in args.model:
         contract = read_contract(model)
         representation = contract["representation"]
@@ -68,6 +99,17 @@ def main():
                       **evaluate(session, names, representation, images[:end], poses[:end])}
             print(json.dumps(result), flush=True)
             results.append(result)
+        if images:
+            rows = uncertainties(session, names, images)
+            for path, (sigma, spread) in zip(args.images, rows):
+                result = {"model": model.name, "image": str(path), "position_sigma_cm": sigma, "heading_spread_deg": spread}
+                print(json.dumps(result), flush=True)
+                results.append(result)
+            summary = {"model": model.name, "model_id": contract["model_id"], "images": len(rows),
+                       "position_sigma_median_cm": float(np.median([sigma for sigma, _ in rows])),
+                       "heading_spread_median_deg": float(np.median([spread for _, spread in rows]))}
+            print(json.dumps(summary), flush=True)
+            results.append(summary)
     if args.json:
         args.json.write_text(json.dumps(results, indent=1) + "\n")
 
