@@ -225,8 +225,8 @@ def main():
                              "(the number is logged; pass it as --epochs to repeat the run)")
     parser.add_argument("--init", type=Path, help="continue from this run directory's weights.pt (a new schedule)")
     parser.add_argument("--init-onnx", type=Path,
-                        help="continue from an exported fp32 ONNX file (its batch norms re-derived on 512 of the "
-                             "training frames; a new schedule), e.g. the committed default")
+                        help=f"continue from an exported fp32 ONNX file (its batch norms re-derived on "
+                             f"{ONNX_STATISTICS_FRAMES} of the training frames; a new schedule), e.g. the committed default")
     parser.add_argument("--out", required=True, type=Path)
     args = parser.parse_args()
     if args.init and args.init_onnx:
