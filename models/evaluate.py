@@ -54,7 +54,10 @@ def evaluate(session, names, representation, images, poses):
 
 def reduce_to_input(path, width=160, height=120):
     """An image file as the network's uint8 input: means of whole blocks (rounded to 8 bits)."""
-    image = np.asarray(Image.open(path).convert("RGB"), np.float32)
+    try:
+        image = np.asarray(Image.open(path).convert("RGB"), np.float32)
+    except OSError as error:  # PIL's UnidentifiedImageError is one
+        raise SystemExit(f"{path}: not a readable image ({error})") from error
     rows, columns = image.shape[:2]
     block = rows // height
     if block < 1 or rows != block * height or columns != block * width:
@@ -85,7 +88,7 @@ def main():
         parser.error("nothing to evaluate: give --data or --images")
     results = []
     recordings = [(path, *load_recording(path)) for path in args.data]
-    images = [reduce_to_input(path) for path in args.images]
+    unposed = [reduce_to_input(path) for path in args.images]
     for model in args.model:
         contract = read_contract(model)
         representation = contract["representation"]
@@ -99,8 +102,8 @@ def main():
                       **evaluate(session, names, representation, images[:end], poses[:end])}
             print(json.dumps(result), flush=True)
             results.append(result)
-        if images:
-            rows = uncertainties(session, names, images)
+        if unposed:
+            rows = uncertainties(session, names, unposed)
             for path, (sigma, spread) in zip(args.images, rows):
                 result = {"model": model.name, "image": str(path), "position_sigma_cm": sigma, "heading_spread_deg": spread}
                 print(json.dumps(result), flush=True)
