@@ -28,12 +28,17 @@ from relocnet.fold import fold
 from relocnet.onnxfile import normalise, read_contract
 
 
-def evaluate(session, names, representation, images, poses):
+def predict(session, names, images):
+    """The model's outputs on uint8 NHWC `images`, each output stacked over the frames."""
     outputs = {name: [] for name in names}
     for image in images:  # the exported graphs take one frame at a time
         for name, value in zip(names, session.run(names, {"image": normalise(image[None])})):
             outputs[name].append(value.reshape(-1))
-    outputs = {name: np.stack(values) for name, values in outputs.items()}
+    return {name: np.stack(values) for name, values in outputs.items()}
+
+
+def evaluate(session, names, representation, images, poses):
+    outputs = predict(session, names, images)
     fx, fy, ftheta, _ = fold(poses[:, 0], poses[:, 1], poses[:, 2], representation)
     location = np.hypot(outputs["position"][:, 0] - fx, outputs["position"][:, 1] - fy)
     heading = np.arccos(np.clip(outputs["heading"][:, 0] * np.cos(ftheta) + outputs["heading"][:, 1] * np.sin(ftheta), -1, 1))
@@ -67,13 +72,10 @@ def reduce_to_input(path, width=160, height=120):
 
 def uncertainties(session, names, images):
     """Per image: the predicted position sigma (cm) and the heading's spread 1/sqrt(kappa) (degrees)."""
-    rows = []
-    for image in images:
-        outputs = dict(zip(names, session.run(names, {"image": normalise(image[None])})))
-        kappa = float(outputs["heading_kappa"].reshape(-1)[0])
-        rows.append((round(float(outputs["position_sigma"].reshape(-1)[0]) * 100, 1),
-                     round(float(np.degrees(1 / np.sqrt(kappa))), 2)))
-    return rows
+    outputs = predict(session, names, images)
+    sigma = outputs["position_sigma"][:, 0] * 100
+    spread = np.degrees(1 / np.sqrt(outputs["heading_kappa"][:, 0]))
+    return [(round(float(s), 1), round(float(h), 2)) for s, h in zip(sigma, spread)]
 
 
 def main():

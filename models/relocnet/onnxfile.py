@@ -29,8 +29,15 @@ class Frames(CalibrationDataReader):
 
 def read_contract(path):
     """The contract document of an ONNX file."""
-    model = onnx.load(path)
-    return json.loads(next(entry.value for entry in model.metadata_props if entry.key == CONTRACT_KEY))
+    return contract_of(onnx.load(path), path)
+
+
+def contract_of(model, path):
+    """The contract document of a loaded ONNX model (read from `path`, named in the error)."""
+    document = next((entry.value for entry in model.metadata_props if entry.key == CONTRACT_KEY), None)
+    if document is None:
+        raise ValueError(f"{path}: no {CONTRACT_KEY} metadata (not a relocd model?)")
+    return json.loads(document)
 
 
 def with_contract(path, document):

@@ -12,8 +12,6 @@ left out (it is the contract's `training.sigma_calibration`); train.py calibrate
 The unfolded network is checked against the file with onnxruntime before it is handed back.
 """
 
-import json
-
 import numpy as np
 import onnx
 import onnxruntime
@@ -23,19 +21,12 @@ from torch import nn
 
 from .fold import FOLD_BITS
 from .nets import ARCHITECTURES, RelocNet, output_names
-from .onnxfile import CONTRACT_KEY, normalise
+from .onnxfile import contract_of, normalise
 
 # Frames on which the unfolded network is checked against the file (onnxruntime), and the largest
 # difference allowed in any raw output (position in m, heading, fold probabilities).
 CHECK_FRAMES = 8
 CHECK_TOLERANCE = 1e-4
-
-
-def _contract(model, path):
-    document = next((entry.value for entry in model.metadata_props if entry.key == CONTRACT_KEY), None)
-    if document is None:
-        raise ValueError(f"{path}: no {CONTRACT_KEY} metadata (not a relocd model?)")
-    return json.loads(document)
 
 
 def _conv_bn_pairs(net):
@@ -69,7 +60,7 @@ def unfold(path, images, batch=256):
         model = onnx.load(str(path))
     except Exception as error:  # protobuf's DecodeError, an OSError, ...
         raise ValueError(f"{path}: not a readable ONNX file ({error})") from error
-    contract = _contract(model, path)
+    contract = contract_of(model, path)
     training = contract.get("training", {})
     if training.get("architecture") not in ARCHITECTURES or "width" not in training:
         raise ValueError(f"{path}: the contract names no known architecture and width "
@@ -121,8 +112,7 @@ def unfold(path, images, batch=256):
     net.eval()
     with torch.no_grad():
         for start in range(0, len(images), batch):
-            chunk = torch.from_numpy(np.ascontiguousarray(images[start : start + batch]))
-            net(chunk.permute(0, 3, 1, 2).float().div(255.0).sub(0.5).div(0.25))
+            net(torch.from_numpy(normalise(images[start : start + batch])))
     for handle in hooks:
         handle.remove()
     with torch.no_grad():
