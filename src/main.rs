@@ -822,6 +822,16 @@ fn inspect(args: InspectArgs) -> anyhow::Result<()> {
     camera.roll_deg = args.camera_roll.unwrap_or(camera.roll_deg);
     let pose =
         camera.mounting().context("--camera-height/--camera-pitch/--camera-roll")?.pose_on(None, None)?;
+    let image_files = args.paths.iter().any(|path| !path.join(relocd::recording::INDEX_FILE).is_file());
+    if image_files && !overridden && !args.no_camera {
+        eprintln!(
+            "relocd inspect: an image file carries no camera pose; its line points are gated under the \
+             config's camera with the head at zero (height {:.2} m, pitch {:.1}°, roll {:.1}°). Give \
+             --camera-height/--camera-pitch as the robot held its head, or --no-camera for the image \
+             stage alone.",
+            camera.height_m, camera.pitch_deg, camera.roll_deg
+        );
+    }
     let options = relocd::inspect::InspectOptions {
         intrinsics: args.field_of_view.applied_to(CameraIntrinsics::nao_top())?,
         camera: (!args.no_camera).then_some(pose),

@@ -555,6 +555,15 @@ fn inspect_without_a_camera_and_on_bad_input() {
     assert!(line["camera"].is_null() && line.get("ground_points").is_none(), "{line}");
     assert!(line["line_points"].as_array().unwrap().len() >= 20, "{line}");
 
+    assert!(!stderr(&output).contains("no camera pose"), "{}", stderr(&output));
+    // Without a camera for an image file the config's (head at zero) gates the points, and a hint
+    // says so; a camera given on the command line needs none.
+    let output = relocd(&["inspect", image.to_str().unwrap()]);
+    assert!(output.status.success(), "{}", stderr(&output));
+    assert!(stderr(&output).contains("no camera pose") && stderr(&output).contains("--camera-pitch"));
+    let output = relocd(&["inspect", "--camera-pitch", "18", image.to_str().unwrap()]);
+    assert!(output.status.success() && !stderr(&output).contains("no camera pose"), "{}", stderr(&output));
+
     let dir = tempfile::tempdir().unwrap();
     let broken = dir.path().join("broken.png");
     std::fs::write(&broken, b"\x89PNG truncated").unwrap();
