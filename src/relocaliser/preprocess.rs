@@ -54,6 +54,8 @@ pub fn preprocess(frame: &Frame, spec: &InputSpec) -> Result<InputTensor, Prepro
     let count = (factor * factor) as f32;
     // Per input pixel of the current row: the sums of its camera pixels' three channels.
     let mut sums = vec![[0u32; 3]; input_width];
+    // Per byte of a YUYV row: its sum over the current input row's camera lines.
+    let mut line_sums: Vec<u32> = Vec::new();
     for row in 0..input_height {
         sums.fill([0; 3]);
         let lines = row * factor..(row + 1) * factor;
@@ -71,22 +73,27 @@ pub fn preprocess(frame: &Frame, spec: &InputSpec) -> Result<InputTensor, Prepro
                     }
                 }
             }
-            // An even block holds whole Y0 U Y1 V pairs: each U and V counts for both pixels.
+            // An even block holds whole Y0 U Y1 V pairs: each U and V counts for both pixels. The
+            // block's lines are added byte by byte first (a loop the compiler vectorises), then
+            // each block's pairs once.
             Frame::Yuyv(image) if factor % 2 == 0 => {
                 let raw = image.as_bytes();
-                for y in lines {
-                    let line = &raw[y * fw * 2..(y + 1) * fw * 2];
-                    for (sum, block) in sums.iter_mut().zip(line.chunks_exact(factor * 2)) {
-                        let (mut luma, mut u, mut v) = (0u32, 0u32, 0u32);
-                        for pair in block.chunks_exact(4) {
-                            luma += pair[0] as u32 + pair[2] as u32;
-                            u += pair[1] as u32;
-                            v += pair[3] as u32;
-                        }
-                        sum[0] += luma;
-                        sum[1] += 2 * u;
-                        sum[2] += 2 * v;
+                let line = |y: usize| &raw[y * fw * 2..(y + 1) * fw * 2];
+                line_sums.clear();
+                line_sums.extend(line(lines.start).iter().map(|&byte| u32::from(byte)));
+                for y in lines.start + 1..lines.end {
+                    for (total, &byte) in line_sums.iter_mut().zip(line(y)) {
+                        *total += u32::from(byte);
                     }
+                }
+                for (sum, block) in sums.iter_mut().zip(line_sums.chunks_exact(factor * 2)) {
+                    let (mut luma, mut u, mut v) = (0, 0, 0);
+                    for pair in block.chunks_exact(4) {
+                        luma += pair[0] + pair[2];
+                        u += pair[1];
+                        v += pair[3];
+                    }
+                    *sum = [luma, 2 * u, 2 * v];
                 }
             }
             Frame::Yuyv(image) => {
