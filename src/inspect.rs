@@ -17,7 +17,7 @@ use thiserror::Error;
 
 use crate::frame::Frame;
 use crate::geometry::{Camera, CameraIntrinsics, CameraPose, FieldModel, FieldPose};
-use crate::recording::{INDEX_FILE, Recording, RecordingError};
+use crate::recording::{Recording, RecordingError};
 use crate::refine::line_map::field_primitives;
 use crate::refine::{
     ImagePercepts, LineRefiner, PerceptError, PoseCheck, PostSighting, detect, detect_in_image,
@@ -165,7 +165,7 @@ pub fn inspect(
         .flat_map(|primitive| primitive.samples(FIELD_SAMPLE_SPACING))
         .collect();
     for path in paths {
-        if path.join(INDEX_FILE).is_file() {
+        if Recording::is_at(path) {
             let recording = Recording::open(path)?;
             for record in recording.records() {
                 let frame = recording.load_frame(record)?;

@@ -822,7 +822,7 @@ fn inspect(args: InspectArgs) -> anyhow::Result<()> {
     camera.roll_deg = args.camera_roll.unwrap_or(camera.roll_deg);
     let pose =
         camera.mounting().context("--camera-height/--camera-pitch/--camera-roll")?.pose_on(None, None)?;
-    let image_files = args.paths.iter().any(|path| !path.join(relocd::recording::INDEX_FILE).is_file());
+    let image_files = args.paths.iter().any(|path| !Recording::is_at(path));
     if image_files && !overridden && !args.no_camera {
         eprintln!(
             "relocd inspect: an image file carries no camera pose; its line points are gated under the \

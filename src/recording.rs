@@ -155,6 +155,11 @@ pub struct Recording {
 }
 
 impl Recording {
+    /// Whether `path` is a recording directory (it holds `frames.jsonl`), not a single frame's file.
+    pub fn is_at(path: &Path) -> bool {
+        path.join(INDEX_FILE).is_file()
+    }
+
     /// Reads and checks `frames.jsonl` (blank lines are skipped). Frame files are read on demand.
     pub fn open(directory: &Path) -> Result<Self, RecordingError> {
         let index = directory.join(INDEX_FILE);
