@@ -9,6 +9,7 @@
 //! check is ignored by `cargo test` until it does; what it does meet (the images without lines, and
 //! the pooled precision it has reached) and the scorer's own tests always run.
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use image::RgbImage;
@@ -22,6 +23,15 @@ const LINE: [u8; 3] = [70, 199, 10];
 const GOAL: [u8; 3] = [199, 10, 193];
 /// A point is right when the mask has a line pixel within this many pixels.
 const TOLERANCE: i64 = 3;
+/// The mask's classes (tests/data/real-images/NOTICE) other than lines, by colour.
+const CLASSES: [([u8; 3], &str); 6] = [
+    ([245, 41, 5], "carpet"),
+    ([199, 92, 10], "ball"),
+    ([10, 193, 199], "robot"),
+    (GOAL, "goal"),
+    ([45, 10, 199], "background"),
+    ([0, 0, 0], "uncertain"),
+];
 
 fn data() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/real-images")
@@ -79,6 +89,15 @@ struct Score {
     right: usize,
     mask_crossings: usize,
     found: usize,
+    /// The points off the lines, counted by the mask's class under each.
+    wrong_on: BTreeMap<&'static str, usize>,
+}
+
+/// The mask's class at (u, v), other than a line.
+fn class_at(mask: &RgbImage, u: f64, v: f64) -> &'static str {
+    let pixel =
+        mask.get_pixel((u.floor() as u32).min(mask.width() - 1), (v.floor() as u32).min(mask.height() - 1));
+    CLASSES.iter().find(|(colour, _)| *colour == pixel.0).map_or("other", |&(_, name)| name)
 }
 
 fn score(name: &str) -> Score {
@@ -87,6 +106,10 @@ fn score(name: &str) -> Score {
     let percepts = detect_in_image(&Frame::Rgb(image)).unwrap();
     let centres: Vec<_> = percepts.crossings.iter().map(|crossing| crossing.centre()).collect();
     let right = centres.iter().filter(|c| near_line(&mask, c.x, c.y)).count();
+    let mut wrong_on = BTreeMap::new();
+    for c in centres.iter().filter(|c| !near_line(&mask, c.x, c.y)) {
+        *wrong_on.entry(class_at(&mask, c.x, c.y)).or_insert(0) += 1;
+    }
     let truth = mask_crossings(&mask, percepts.scan_spacing() as u32);
     let found = truth
         .iter()
@@ -100,6 +123,7 @@ fn score(name: &str) -> Score {
         right,
         mask_crossings: truth.len(),
         found,
+        wrong_on,
     }
 }
 
@@ -121,11 +145,15 @@ fn masked_images() -> Vec<String> {
 fn line_percepts_hold_on_real_images() {
     let scores: Vec<Score> = masked_images().iter().map(|name| score(name)).collect();
     assert_eq!(scores.len(), 12, "the twelve masked images");
-    println!("| image | mask line share | points | on a line (≤ 3 px) | mask crossings found |");
-    println!("|---|---|---|---|---|");
+    println!(
+        "| image | mask line share | points | on a line (≤ 3 px) | mask crossings found | off the lines, on |"
+    );
+    println!("|---|---|---|---|---|---|");
     for s in &scores {
+        let wrong_on: Vec<String> =
+            s.wrong_on.iter().map(|(class, count)| format!("{class} {count}")).collect();
         println!(
-            "| {} | {:.1}% | {} | {} ({:.1}%) | {} of {} ({:.0}%) |",
+            "| {} | {:.1}% | {} | {} ({:.1}%) | {} of {} ({:.0}%) | {} |",
             s.name,
             100.0 * s.line_share,
             s.points,
@@ -133,15 +161,20 @@ fn line_percepts_hold_on_real_images() {
             100.0 * s.right as f64 / s.points.max(1) as f64,
             s.found,
             s.mask_crossings,
-            100.0 * s.found as f64 / s.mask_crossings.max(1) as f64
+            100.0 * s.found as f64 / s.mask_crossings.max(1) as f64,
+            wrong_on.join(", ")
         );
     }
     let (points, right): (usize, usize) = scores.iter().fold((0, 0), |(p, r), s| (p + s.points, r + s.right));
     let (truth, found): (usize, usize) =
         scores.iter().fold((0, 0), |(t, f), s| (t + s.mask_crossings, f + s.found));
+    let mut wrong_on: BTreeMap<&str, usize> = BTreeMap::new();
+    for (class, count) in scores.iter().flat_map(|s| &s.wrong_on) {
+        *wrong_on.entry(class).or_insert(0) += count;
+    }
     let precision = right as f64 / points as f64;
     println!(
-        "pooled: precision {:.1}% ({right} of {points}), recall {:.1}% ({found} of {truth} mask crossings)",
+        "pooled: precision {:.1}% ({right} of {points}), recall {:.1}% ({found} of {truth} mask crossings); off the lines, on: {wrong_on:?}",
         100.0 * precision,
         100.0 * found as f64 / truth as f64
     );
