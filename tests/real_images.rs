@@ -23,7 +23,7 @@ const LINE: [u8; 3] = [70, 199, 10];
 const GOAL: [u8; 3] = [199, 10, 193];
 /// A point is right when the mask has a line pixel within this many pixels.
 const TOLERANCE: i64 = 3;
-/// The mask's classes (tests/data/real-images/NOTICE) other than lines, by colour.
+/// The mask's classes (tests/data/real-images/NOTICE.md) other than lines, by colour.
 const CLASSES: [([u8; 3], &str); 6] = [
     ([245, 41, 5], "carpet"),
     ([199, 92, 10], "ball"),
