@@ -13,6 +13,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use image::RgbImage;
+use nalgebra::Point2;
 use relocd::frame::Frame;
 use relocd::geometry::{CameraIntrinsics, CameraPose, FieldDimensions};
 use relocd::refine::{detect, detect_in_image};
@@ -105,9 +106,10 @@ fn score(name: &str) -> Score {
     let mask = load(&data().join(format!("{name}.png")));
     let percepts = detect_in_image(&Frame::Rgb(image)).unwrap();
     let centres: Vec<_> = percepts.crossings.iter().map(|crossing| crossing.centre()).collect();
-    let right = centres.iter().filter(|c| near_line(&mask, c.x, c.y)).count();
+    let (on_lines, off_lines): (Vec<&Point2<f64>>, Vec<_>) =
+        centres.iter().partition(|c| near_line(&mask, c.x, c.y));
     let mut wrong_on = BTreeMap::new();
-    for c in centres.iter().filter(|c| !near_line(&mask, c.x, c.y)) {
+    for c in off_lines {
         *wrong_on.entry(class_at(&mask, c.x, c.y)).or_insert(0) += 1;
     }
     let truth = mask_crossings(&mask, percepts.scan_spacing() as u32);
@@ -120,7 +122,7 @@ fn score(name: &str) -> Score {
         name: name.to_owned(),
         line_share: line_pixels as f64 / (mask.width() * mask.height()) as f64,
         points: centres.len(),
-        right,
+        right: on_lines.len(),
         mask_crossings: truth.len(),
         found,
         wrong_on,
